@@ -1,0 +1,201 @@
+//! Command-line definitions (clap derive). Each subcommand's arguments live beside the others
+//! here; what they do lives in [`crate::commands`].
+
+use crate::camera::{parse_view_set, DEFAULT_VIEWS};
+use crate::frame::UpAxis;
+use crate::io::{Encoding, Format};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "mvpcc",
+    version,
+    about = "Multi-view point cloud completion (MVPCC-Net) for mobile laser scans of street objects"
+)]
+pub struct Cli {
+    /// Print nothing but errors and results.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Score predicted clouds against ground truth (Chamfer distances, F-score), or predicted
+    /// view images against ground-truth views (PSNR, SSIM, MAE).
+    Eval(EvalArgs),
+    /// Normalize a cloud and project it into view images (the original dataset's PNG pairs).
+    Project(ProjectArgs),
+    /// Turn view images back into a cloud: erode, merge, de-duplicate, remove outliers.
+    Reproject(ReprojectArgs),
+    /// Statistical outlier removal (PCL's StatisticalOutlierRemoval) as a tool of its own.
+    Filter(FilterArgs),
+}
+
+/// How an input file is read.
+#[derive(Debug, Args)]
+pub struct InputOptions {
+    /// Input format, overriding the file extension.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+}
+
+/// How an output cloud is written.
+#[derive(Debug, Args)]
+pub struct OutputOptions {
+    /// Output format, overriding the file extension.
+    #[arg(long, value_enum)]
+    pub out_format: Option<Format>,
+    /// Body encoding for PLY and PCD outputs.
+    #[arg(long, value_enum, default_value_t = Encoding::Binary)]
+    pub encoding: Encoding,
+}
+
+#[derive(Debug, Args)]
+pub struct SorOptions {
+    /// Neighbours per point for the outlier filter, excluding the point itself (PCL's mean_k;
+    /// Open3D's nb_neighbors is this + 1). 0 turns the filter off.
+    #[arg(long, default_value_t = 20)]
+    pub sor_k: usize,
+    /// Points whose mean neighbour distance exceeds mean + this × std are removed.
+    #[arg(long, default_value_t = 5.0)]
+    pub sor_std: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Metric {
+    /// Chamfer distances: cd_l2_half (the paper's), cd_l1 (PCN), cd_l2 (PoinTr).
+    Cd,
+    /// Precision, recall and F1 at each --tau.
+    F1,
+    /// PSNR of view colours (needs --pred-views/--gt-views).
+    Psnr,
+    /// SSIM of view colours.
+    Ssim,
+    /// Mean absolute error of view colours.
+    Mae,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Normalize {
+    /// Coordinates as stored.
+    None,
+    /// Both clouds mapped by the ground truth's box: centred, longest side 1.
+    GtBox,
+}
+
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Metrics to compute.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cd,f1")]
+    pub metrics: Vec<Metric>,
+    /// Predicted cloud.
+    #[arg(long, requires = "gt", conflicts_with_all = ["pred_dir", "pred_views"])]
+    pub pred: Option<PathBuf>,
+    /// Ground-truth cloud.
+    #[arg(long, requires = "pred")]
+    pub gt: Option<PathBuf>,
+    /// Directory of predicted clouds, matched to --gt-dir by file stem.
+    #[arg(long, requires = "gt_dir", conflicts_with = "pred_views")]
+    pub pred_dir: Option<PathBuf>,
+    /// Directory of ground-truth clouds.
+    #[arg(long, requires = "pred_dir")]
+    pub gt_dir: Option<PathBuf>,
+    /// Directory of predicted view images (locations_NNN.png, color_NNN.png).
+    #[arg(long, requires = "gt_views")]
+    pub pred_views: Option<PathBuf>,
+    /// Directory of ground-truth view images.
+    #[arg(long, requires = "pred_views")]
+    pub gt_views: Option<PathBuf>,
+    /// F-score thresholds (strict <), in the clouds' units.
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.005")]
+    pub tau: Vec<f64>,
+    /// Coordinate normalization applied before scoring.
+    #[arg(long, value_enum, default_value_t = Normalize::None)]
+    pub normalize: Normalize,
+    /// Print results as JSON on stdout instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub input: InputOptions,
+}
+
+/// A list of rig cameras as typed on the command line (`5,6,7,8`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ViewList(pub Vec<usize>);
+
+impl std::str::FromStr for ViewList {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        parse_view_set(text)
+            .map(ViewList)
+            .map_err(|e| e.to_string())
+    }
+}
+
+impl std::fmt::Display for ViewList {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> = self.0.iter().map(|v| v.to_string()).collect();
+        f.write_str(&parts.join(","))
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct ProjectArgs {
+    /// Input cloud (PLY, PCD, LAS/LAZ, XYZ).
+    pub input: PathBuf,
+    /// Directory for the view images and frame.json (created if missing).
+    pub outdir: PathBuf,
+    /// Rig cameras (1–20) to render.
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 256)]
+    pub size: usize,
+    /// Input's up axis [default: z for LAS/LAZ, y otherwise].
+    #[arg(long, value_enum)]
+    pub up: Option<UpAxis>,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct ReprojectArgs {
+    /// Directory of view images (as written by `mvpcc project`, or the original dataset's).
+    pub viewdir: PathBuf,
+    /// Output cloud.
+    pub output: PathBuf,
+    /// Rig cameras to use [default: every locations_NNN.png found].
+    #[arg(long)]
+    pub views: Option<ViewList>,
+    /// Erosion element side in pixels before re-projection; 0 = off. Meant for dense
+    /// (inpainted) views: it removes most of a raw sparse scan.
+    #[arg(long, default_value_t = 3)]
+    pub erode: usize,
+    /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
+    #[arg(long, default_value_t = 1e-4)]
+    pub dedup: f64,
+    /// Write normalized coordinates even when the directory has a frame.json.
+    #[arg(long)]
+    pub normalized: bool,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct FilterArgs {
+    /// Input cloud.
+    pub input: PathBuf,
+    /// Output cloud (inliers, with all their attributes).
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}

@@ -1,0 +1,202 @@
+//! The one point cloud type every stage shares.
+
+/// Storage type of a per-point attribute, remembered so writers can keep the input's types.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScalarKind {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl ScalarKind {
+    pub fn size(self) -> usize {
+        match self {
+            ScalarKind::I8 | ScalarKind::U8 => 1,
+            ScalarKind::I16 | ScalarKind::U16 => 2,
+            ScalarKind::I32 | ScalarKind::U32 | ScalarKind::F32 => 4,
+            ScalarKind::F64 => 8,
+        }
+    }
+}
+
+/// A scalar per-point attribute the pipeline does not interpret (intensity, normals, labels…),
+/// carried from input to output. Values are held as f64, which is exact for every kind.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Attribute {
+    pub name: String,
+    pub kind: ScalarKind,
+    pub values: Vec<f64>,
+}
+
+/// LAS-style integer quantization of coordinates (`x = offset + scale · X`), kept so that a
+/// LAS file is written back with its input's scale and offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quantization {
+    pub scale: [f64; 3],
+    pub offset: [f64; 3],
+}
+
+/// Positions in f64 (MLS files carry georeferenced coordinates in the hundreds of kilometres),
+/// optional 8-bit RGB, and the input's other attributes.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointCloud {
+    pub positions: Vec<[f64; 3]>,
+    pub colors: Option<Vec<[u8; 3]>>,
+    pub attributes: Vec<Attribute>,
+    pub quantization: Option<Quantization>,
+}
+
+/// Axis-aligned bounding box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl Aabb {
+    pub fn extent(&self) -> [f64; 3] {
+        [0, 1, 2].map(|i| self.max[i] - self.min[i])
+    }
+
+    pub fn center(&self) -> [f64; 3] {
+        [0, 1, 2].map(|i| 0.5 * (self.max[i] + self.min[i]))
+    }
+
+    pub fn of(points: &[[f64; 3]]) -> Option<Aabb> {
+        let first = *points.first()?;
+        let mut b = Aabb {
+            min: first,
+            max: first,
+        };
+        for p in points {
+            for i in 0..3 {
+                b.min[i] = b.min[i].min(p[i]);
+                b.max[i] = b.max[i].max(p[i]);
+            }
+        }
+        Some(b)
+    }
+}
+
+impl PointCloud {
+    pub fn from_positions(positions: Vec<[f64; 3]>) -> Self {
+        PointCloud {
+            positions,
+            ..Default::default()
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    pub fn bounds(&self) -> Option<Aabb> {
+        Aabb::of(&self.positions)
+    }
+
+    pub fn attribute(&self, name: &str) -> Option<&Attribute> {
+        self.attributes.iter().find(|a| a.name == name)
+    }
+
+    /// The points at `indices`, in that order, with all their colours and attributes.
+    pub fn select(&self, indices: &[usize]) -> PointCloud {
+        PointCloud {
+            positions: indices.iter().map(|&i| self.positions[i]).collect(),
+            colors: self
+                .colors
+                .as_ref()
+                .map(|c| indices.iter().map(|&i| c[i]).collect()),
+            attributes: self
+                .attributes
+                .iter()
+                .map(|a| Attribute {
+                    name: a.name.clone(),
+                    kind: a.kind,
+                    values: indices.iter().map(|&i| a.values[i]).collect(),
+                })
+                .collect(),
+            quantization: self.quantization,
+        }
+    }
+
+    /// The points for which `keep` is true.
+    pub fn filter(&self, keep: &[bool]) -> PointCloud {
+        let indices: Vec<usize> = (0..self.len()).filter(|&i| keep[i]).collect();
+        self.select(&indices)
+    }
+
+    /// Drops points with a NaN or infinite coordinate and returns how many were dropped.
+    pub fn drop_non_finite(&mut self) -> usize {
+        let keep: Vec<bool> = self
+            .positions
+            .iter()
+            .map(|p| p.iter().all(|c| c.is_finite()))
+            .collect();
+        let dropped = keep.iter().filter(|k| !**k).count();
+        if dropped > 0 {
+            *self = self.filter(&keep);
+        }
+        dropped
+    }
+
+    /// Positions as f32, the precision the view images and the network work in. Only meaningful
+    /// for normalized clouds.
+    pub fn positions_f32(&self) -> Vec<[f32; 3]> {
+        self.positions.iter().map(|p| p.map(|c| c as f32)).collect()
+    }
+
+    /// Checks that every per-point array has one entry per point.
+    pub fn is_consistent(&self) -> bool {
+        let n = self.len();
+        self.colors.as_ref().is_none_or(|c| c.len() == n)
+            && self.attributes.iter().all(|a| a.values.len() == n)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> PointCloud {
+        PointCloud {
+            positions: vec![[0.0, 0.0, 0.0], [f64::NAN, 1.0, 1.0], [2.0, -1.0, 3.0]],
+            colors: Some(vec![[1, 2, 3], [4, 5, 6], [7, 8, 9]]),
+            attributes: vec![Attribute {
+                name: "intensity".into(),
+                kind: ScalarKind::U16,
+                values: vec![10.0, 20.0, 30.0],
+            }],
+            quantization: None,
+        }
+    }
+
+    #[test]
+    fn drop_non_finite_keeps_attributes_aligned() {
+        let mut c = sample();
+        assert_eq!(c.drop_non_finite(), 1);
+        assert_eq!(c.positions, vec![[0.0, 0.0, 0.0], [2.0, -1.0, 3.0]]);
+        assert_eq!(c.colors.as_ref().unwrap(), &vec![[1, 2, 3], [7, 8, 9]]);
+        assert_eq!(c.attributes[0].values, vec![10.0, 30.0]);
+        assert!(c.is_consistent());
+    }
+
+    #[test]
+    fn bounds_cover_all_points() {
+        let mut c = sample();
+        c.drop_non_finite();
+        let b = c.bounds().unwrap();
+        assert_eq!(b.min, [0.0, -1.0, 0.0]);
+        assert_eq!(b.max, [2.0, 0.0, 3.0]);
+        assert_eq!(b.center(), [1.0, -0.5, 1.5]);
+        assert!(PointCloud::default().bounds().is_none());
+    }
+}

@@ -1,0 +1,33 @@
+use super::{load, Log};
+use crate::cli::FilterArgs;
+use crate::filter::{inliers, SorParams};
+use crate::io::{check_output, write_cloud};
+
+pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
+    check_output(&args.output, &[&args.input])?;
+    let cloud = load(&args.input, args.input_options.format, log)?;
+    let keep = inliers(
+        &cloud.positions,
+        SorParams {
+            k: args.sor.sor_k,
+            std_mul: args.sor.sor_std,
+        },
+    );
+    let filtered = cloud.filter(&keep);
+    write_cloud(
+        &args.output,
+        &filtered,
+        args.output_options.out_format,
+        args.output_options.encoding,
+    )?;
+    log.info(format!(
+        "{}: kept {} of {} points ({} outliers removed, k = {}, σ = {})",
+        args.output.display(),
+        filtered.len(),
+        cloud.len(),
+        cloud.len() - filtered.len(),
+        args.sor.sor_k,
+        args.sor.sor_std
+    ));
+    Ok(())
+}

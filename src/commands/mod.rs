@@ -1,0 +1,57 @@
+//! One module per subcommand; errors become anyhow here and one `error: …` line in main.
+
+mod eval;
+mod filter;
+mod project;
+mod reproject;
+
+use crate::cli::{Cli, Command};
+use crate::cloud::PointCloud;
+use crate::io::{read_cloud, Format};
+use std::fmt::Display;
+use std::path::Path;
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    let log = Log { quiet: cli.quiet };
+    match cli.command {
+        Command::Eval(args) => eval::run(args, log),
+        Command::Project(args) => project::run(args, log),
+        Command::Reproject(args) => reproject::run(args, log),
+        Command::Filter(args) => filter::run(args, log),
+    }
+}
+
+/// Messages for a person, on stderr; `--quiet` keeps only warnings.
+#[derive(Debug, Clone, Copy)]
+pub struct Log {
+    quiet: bool,
+}
+
+impl Log {
+    pub fn info(&self, message: impl Display) {
+        if !self.quiet {
+            eprintln!("{message}");
+        }
+    }
+
+    pub fn warn(&self, message: impl Display) {
+        eprintln!("warning: {message}");
+    }
+
+    pub fn quiet(&self) -> bool {
+        self.quiet
+    }
+}
+
+/// Reads a cloud, warning about points dropped for NaN or infinite coordinates.
+pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Result<PointCloud> {
+    let loaded = read_cloud(path, format)?;
+    if loaded.non_finite_dropped > 0 {
+        log.warn(format!(
+            "{}: dropped {} points with NaN or infinite coordinates",
+            path.display(),
+            loaded.non_finite_dropped
+        ));
+    }
+    Ok(loaded.cloud)
+}

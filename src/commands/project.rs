@@ -1,0 +1,76 @@
+use super::{load, Log};
+use crate::camera::Camera;
+use crate::cli::ProjectArgs;
+use crate::frame::{Frame, UpAxis};
+use crate::io::{atomic_write, Format};
+use crate::projection::project;
+use crate::views::write_views;
+use anyhow::{bail, Context};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// What `project` records beside the views so `reproject` can return to the input's frame.
+#[derive(Debug, Serialize, Deserialize)]
+pub(super) struct ViewsInfo {
+    pub frame: Frame,
+    pub up: UpAxis,
+    pub views: Vec<usize>,
+    pub size: usize,
+    pub points: usize,
+}
+
+pub(super) const INFO_FILE: &str = "frame.json";
+
+/// MLS formats are z-up; the dataset's own formats are y-up.
+fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
+    match format.or_else(|| Format::from_path(input).ok()) {
+        Some(Format::Las | Format::Laz) => UpAxis::Z,
+        _ => UpAxis::Y,
+    }
+}
+
+pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
+    let cameras = Camera::set(&args.views.0, args.size)?;
+    let outdir = &args.outdir;
+    if outdir.exists() && !outdir.is_dir() {
+        bail!("{}: exists and is not a directory", outdir.display());
+    }
+    let cloud = load(&args.input, args.input_options.format, log)?;
+    let up = args
+        .up
+        .unwrap_or_else(|| default_up(&args.input, args.input_options.format));
+    let frame = Frame::fit(&cloud, up).with_context(|| args.input.display().to_string())?;
+    let normalized = frame.normalize(&cloud);
+    let views = project(
+        &normalized.positions_f32(),
+        normalized.colors.as_deref(),
+        &cameras,
+    );
+    if !outdir.is_dir() {
+        std::fs::create_dir(outdir)
+            .with_context(|| format!("{}: cannot create", outdir.display()))?;
+    }
+    write_views(outdir, &views)?;
+    let info = ViewsInfo {
+        frame,
+        up,
+        views: args.views.0.clone(),
+        size: args.size,
+        points: cloud.len(),
+    };
+    let info_path = outdir.join(INFO_FILE);
+    atomic_write(&info_path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &info).map_err(std::io::Error::other)
+    })
+    .with_context(|| info_path.display().to_string())?;
+    log.info(format!(
+        "{}: {} points → {} views of {}×{} px, {} pixels occupied",
+        outdir.display(),
+        cloud.len(),
+        views.views(),
+        args.size,
+        args.size,
+        views.occupied()
+    ));
+    Ok(())
+}

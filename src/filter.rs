@@ -1,0 +1,147 @@
+//! Statistical outlier removal, with PCL's semantics: for each point the mean distance to its
+//! `k` nearest neighbours *excluding itself* (PCL `setMeanK(k)`; Open3D's `nb_neighbors = k+1`);
+//! a point is kept when that mean is at most `μ + σ·std` over the cloud (std with n − 1).
+
+use crate::knn::KnnIndex;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SorParams {
+    /// Neighbours per point, excluding the point itself.
+    pub k: usize,
+    /// Multiple of the standard deviation above the mean that is still an inlier.
+    pub std_mul: f64,
+}
+
+impl Default for SorParams {
+    fn default() -> Self {
+        SorParams {
+            k: 20,
+            std_mul: 5.0,
+        }
+    }
+}
+
+/// Mean distance from each point to its `k` nearest other points (a duplicate counts as a
+/// neighbour at distance 0). Clouds with at most `k` points use all the others.
+pub fn mean_neighbor_distances(points: &[[f64; 3]], k: usize) -> Vec<f64> {
+    if points.len() < 2 || k == 0 {
+        return vec![0.0; points.len()];
+    }
+    let k = k.min(points.len() - 1);
+    let index = KnnIndex::new(points);
+    // The first neighbour is at distance 0: the point itself, or a duplicate of it, which is
+    // the same distance either way; drop one zero.
+    let d = index.k_nearest_distances(points, k + 1);
+    d.chunks_exact(k + 1)
+        .map(|row| row[1..].iter().sum::<f64>() / k as f64)
+        .collect()
+}
+
+/// Inlier flags for a cloud. `k = 0` keeps everything.
+pub fn inliers(points: &[[f64; 3]], params: SorParams) -> Vec<bool> {
+    if params.k == 0 || points.len() < 3 {
+        return vec![true; points.len()];
+    }
+    let mean_d = mean_neighbor_distances(points, params.k);
+    let n = mean_d.len() as f64;
+    let sum: f64 = mean_d.iter().sum();
+    let sq_sum: f64 = mean_d.iter().map(|d| d * d).sum();
+    let mean = sum / n;
+    let variance = ((sq_sum - sum * sum / n) / (n - 1.0)).max(0.0);
+    let threshold = mean + params.std_mul * variance.sqrt();
+    mean_d.iter().map(|&d| d <= threshold).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The definition, by brute force.
+    fn reference(points: &[[f64; 3]], params: SorParams) -> Vec<bool> {
+        let k = params.k.min(points.len() - 1);
+        let mean_d: Vec<f64> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let mut d: Vec<f64> = points
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .map(|(_, q)| ((0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f64>()).sqrt())
+                    .collect();
+                d.sort_by(f64::total_cmp);
+                d[..k].iter().sum::<f64>() / k as f64
+            })
+            .collect();
+        let n = mean_d.len() as f64;
+        let mean = mean_d.iter().sum::<f64>() / n;
+        let var = mean_d.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        mean_d
+            .iter()
+            .map(|&d| d <= mean + params.std_mul * var.sqrt())
+            .collect()
+    }
+
+    /// A deterministic pseudo-random generator, so failures reproduce.
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn matches_brute_force_with_ties_duplicates_and_outliers() {
+        let mut seed = 7;
+        for trial in 0..6 {
+            let mut points: Vec<[f64; 3]> = (0..400)
+                .map(|_| [lcg(&mut seed), lcg(&mut seed), lcg(&mut seed) * 0.1])
+                .collect();
+            // Exact duplicates, grid points with tied distances, and far outliers.
+            for i in 0..40 {
+                points.push(points[i * 3]);
+            }
+            for i in 0..5 {
+                for j in 0..5 {
+                    points.push([i as f64 * 0.05, j as f64 * 0.05, 0.5]);
+                }
+            }
+            for i in 0..8 {
+                points.push([3.0 + i as f64 * (1.0 + lcg(&mut seed)), -2.0, 1.0]);
+            }
+            let params = SorParams {
+                k: [1, 5, 20, 20, 50, 8][trial],
+                std_mul: [1.0, 2.0, 5.0, 0.5, 1.0, 0.0][trial],
+            };
+            let got = inliers(&points, params);
+            let want = reference(&points, params);
+            assert_eq!(got, want, "trial {trial}");
+            if params.std_mul >= 1.0 {
+                assert!(!got[got.len() - 1], "a far outlier is removed");
+            }
+        }
+    }
+
+    #[test]
+    fn small_and_degenerate_clouds() {
+        assert_eq!(inliers(&[], SorParams::default()), Vec::<bool>::new());
+        assert_eq!(inliers(&[[0.0; 3]; 2], SorParams::default()), vec![true; 2]);
+        // All identical: every mean distance is 0, nothing is an outlier.
+        assert_eq!(
+            inliers(&[[1.0; 3]; 30], SorParams::default()),
+            vec![true; 30]
+        );
+        // Fewer points than k: all the others are the neighbours.
+        let pts = [
+            [0.0, 0.0, 0.0],
+            [0.1, 0.0, 0.0],
+            [0.2, 0.0, 0.0],
+            [5.0, 0.0, 0.0],
+        ];
+        let params = SorParams {
+            k: 20,
+            std_mul: 1.0,
+        };
+        assert_eq!(inliers(&pts, params), reference(&pts, params));
+    }
+}

@@ -1,0 +1,172 @@
+//! LAS and LAZ through the `las` crate: scaled integer coordinates (scale and offset kept for
+//! writing back), RGB (16-bit scaled to 8), intensity and classification.
+
+use super::Problem;
+use crate::cloud::{Attribute, PointCloud, Quantization, ScalarKind};
+use las::point::{Classification, Format};
+use las::{Builder, Color, Point, Transform, Vector, Writer};
+use std::io::{BufReader, BufWriter};
+use std::path::Path;
+
+fn las_problem(e: las::Error) -> Problem {
+    match e {
+        las::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            Problem::Malformed("file ends before all the points its header declares".into())
+        }
+        las::Error::Io(io) => Problem::Io(io),
+        other => Problem::Malformed(other.to_string().replace('\n', " ")),
+    }
+}
+
+pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
+    let file = std::fs::File::open(path)?;
+    let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
+    let header = reader.header().clone();
+    let declared = header.number_of_points() as usize;
+    let data = reader.read_all().map_err(las_problem)?;
+    if data.len() < declared {
+        return Err(Problem::Truncated {
+            declared,
+            found: data.len(),
+        });
+    }
+    let t = header.transforms();
+    let quantization = Quantization {
+        scale: [t.x.scale, t.y.scale, t.z.scale],
+        offset: [t.x.offset, t.y.offset, t.z.offset],
+    };
+    let has_color = header.point_format().has_color;
+    let n = data.len();
+    let mut positions = Vec::with_capacity(n);
+    let mut colors16 = Vec::with_capacity(if has_color { n } else { 0 });
+    let mut intensity = Vec::with_capacity(n);
+    let mut classification = Vec::with_capacity(n);
+    for p in data.points() {
+        let p = p.map_err(las_problem)?;
+        positions.push([p.x, p.y, p.z]);
+        if let Some(c) = p.color {
+            colors16.push([c.red, c.green, c.blue]);
+        }
+        intensity.push(p.intensity as f64);
+        classification.push(u8::from(p.classification) as f64);
+    }
+    // Most writers scale 8-bit colour to 16 bits; some store 8-bit values as they are.
+    let sixteen_bit = colors16.iter().flatten().any(|&v| v > 255);
+    let colors = (has_color && colors16.len() == n).then(|| {
+        colors16
+            .iter()
+            .map(|c| {
+                c.map(|v| {
+                    if sixteen_bit {
+                        ((v as u32 + 128) / 257) as u8
+                    } else {
+                        v as u8
+                    }
+                })
+            })
+            .collect()
+    });
+    Ok(PointCloud {
+        positions,
+        colors,
+        attributes: vec![
+            Attribute {
+                name: "intensity".into(),
+                kind: ScalarKind::U16,
+                values: intensity,
+            },
+            Attribute {
+                name: "classification".into(),
+                kind: ScalarKind::U8,
+                values: classification,
+            },
+        ],
+        quantization: Some(quantization),
+    })
+}
+
+/// The input's quantization when every point fits its 32-bit range; otherwise a fresh one
+/// centred on the cloud with a resolution of 1e-7 of its extent (a power of ten).
+fn quantization_for(cloud: &PointCloud) -> Quantization {
+    let fits = |q: &Quantization| {
+        cloud.positions.iter().all(|p| {
+            (0..3).all(|i| ((p[i] - q.offset[i]) / q.scale[i]).round().abs() <= i32::MAX as f64)
+        })
+    };
+    if let Some(q) = cloud.quantization.filter(fits) {
+        return q;
+    }
+    let b = cloud
+        .bounds()
+        .expect("writers are not called with empty clouds");
+    let extent = b.extent().iter().cloned().fold(f64::MIN_POSITIVE, f64::max);
+    let scale = 10f64.powf((extent * 1e-7).log10().floor());
+    Quantization {
+        scale: [scale; 3],
+        offset: b.center(),
+    }
+}
+
+pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Problem> {
+    if cloud.is_empty() {
+        return Err(Problem::NoPoints);
+    }
+    let q = quantization_for(cloud);
+    let mut builder = Builder::from((1, 2));
+    let mut format =
+        Format::new(if cloud.colors.is_some() { 2 } else { 0 }).map_err(las_problem)?;
+    format.is_compressed = compressed;
+    builder.point_format = format;
+    builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
+    builder.transforms = Vector {
+        x: Transform {
+            scale: q.scale[0],
+            offset: q.offset[0],
+        },
+        y: Transform {
+            scale: q.scale[1],
+            offset: q.offset[1],
+        },
+        z: Transform {
+            scale: q.scale[2],
+            offset: q.offset[2],
+        },
+    };
+    let header = builder.into_header().map_err(las_problem)?;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".mvpcc-")
+        .suffix(".tmp")
+        .tempfile_in(dir)?;
+    {
+        let file = tmp.reopen()?;
+        let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
+        let intensity = cloud.attribute("intensity");
+        let classification = cloud.attribute("classification");
+        for i in 0..cloud.len() {
+            let [x, y, z] = cloud.positions[i];
+            let point = Point {
+                x,
+                y,
+                z,
+                intensity: intensity.map_or(0, |a| a.values[i] as u16),
+                classification: classification
+                    .and_then(|a| Classification::new(a.values[i] as u8).ok())
+                    .unwrap_or(Classification::CreatedNeverClassified),
+                color: cloud.colors.as_ref().map(|c| Color {
+                    red: c[i][0] as u16 * 257,
+                    green: c[i][1] as u16 * 257,
+                    blue: c[i][2] as u16 * 257,
+                }),
+                ..Default::default()
+            };
+            writer.write_point(point).map_err(las_problem)?;
+        }
+        writer.close().map_err(las_problem)?;
+    }
+    tmp.persist(path).map_err(|e| Problem::Io(e.error))?;
+    Ok(())
+}

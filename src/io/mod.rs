@@ -1,0 +1,360 @@
+//! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
+//! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it.
+
+mod las;
+mod pcd;
+mod ply;
+mod xyz;
+
+use crate::cloud::PointCloud;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Point cloud file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    Ply,
+    Pcd,
+    Las,
+    Laz,
+    Xyz,
+}
+
+impl Format {
+    /// The format an extension names (case-insensitive); `.txt` and `.csv` are XYZ text.
+    pub fn from_path(path: &Path) -> Result<Format, Problem> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .unwrap_or_default();
+        match ext.as_str() {
+            "ply" => Ok(Format::Ply),
+            "pcd" => Ok(Format::Pcd),
+            "las" => Ok(Format::Las),
+            "laz" => Ok(Format::Laz),
+            "xyz" | "txt" | "csv" | "pts" => Ok(Format::Xyz),
+            _ => Err(Problem::UnsupportedExtension(ext)),
+        }
+    }
+}
+
+/// How PLY and PCD bodies are written (LAS and XYZ have one encoding each).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Encoding {
+    #[default]
+    Binary,
+    Ascii,
+    /// PCD `binary_compressed` (LZF); PLY falls back to binary.
+    Compressed,
+}
+
+/// What went wrong with one file.
+#[derive(Debug, Error)]
+pub enum Problem {
+    #[error("no such file")]
+    NotFound,
+    #[error("is a directory, not a point cloud file")]
+    IsDirectory,
+    #[error("file is empty")]
+    EmptyFile,
+    #[error("contains no points")]
+    NoPoints,
+    #[error("all {0} points have NaN or infinite coordinates")]
+    AllNonFinite(usize),
+    #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt or csv; or pass --format)")]
+    UnsupportedExtension(String),
+    #[error("header declares {declared} points but the file holds only {found}")]
+    Truncated { declared: usize, found: usize },
+    #[error("{0}")]
+    Malformed(String),
+    #[error("output would overwrite the input file")]
+    OverwritesInput,
+    #[error("output directory {} does not exist", .0.display())]
+    NoOutputDirectory(PathBuf),
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// A problem with a named file; displays as `path: problem` on one line.
+#[derive(Debug, Error)]
+#[error("{}: {problem}", path.display())]
+pub struct CloudIoError {
+    pub path: PathBuf,
+    pub problem: Problem,
+}
+
+impl CloudIoError {
+    pub fn new(path: &Path, problem: Problem) -> Self {
+        CloudIoError {
+            path: path.to_path_buf(),
+            problem,
+        }
+    }
+}
+
+/// A loaded cloud and what was dropped on the way in.
+#[derive(Debug)]
+pub struct Loaded {
+    pub cloud: PointCloud,
+    /// Points with NaN or infinite coordinates, dropped (organized PCD files use NaN for
+    /// "no return", so these are common and not an error).
+    pub non_finite_dropped: usize,
+}
+
+/// Reads a cloud; the format comes from the extension unless `format` is given.
+pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIoError> {
+    let err = |problem| CloudIoError::new(path, problem);
+    let format = match format {
+        Some(f) => f,
+        None => Format::from_path(path).map_err(err)?,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| {
+        err(if e.kind() == std::io::ErrorKind::NotFound {
+            Problem::NotFound
+        } else {
+            Problem::Io(e)
+        })
+    })?;
+    if meta.is_dir() {
+        return Err(err(Problem::IsDirectory));
+    }
+    if meta.len() == 0 {
+        return Err(err(Problem::EmptyFile));
+    }
+    let mut cloud = match format {
+        Format::Ply => ply::read(path),
+        Format::Pcd => pcd::read(path),
+        Format::Las | Format::Laz => las::read(path),
+        Format::Xyz => xyz::read(path),
+    }
+    .map_err(err)?;
+    debug_assert!(cloud.is_consistent());
+    if cloud.is_empty() {
+        return Err(err(Problem::NoPoints));
+    }
+    let total = cloud.len();
+    let non_finite_dropped = cloud.drop_non_finite();
+    if cloud.is_empty() {
+        return Err(err(Problem::AllNonFinite(total)));
+    }
+    Ok(Loaded {
+        cloud,
+        non_finite_dropped,
+    })
+}
+
+/// Writes a cloud atomically; the format comes from the extension unless `format` is given.
+pub fn write_cloud(
+    path: &Path,
+    cloud: &PointCloud,
+    format: Option<Format>,
+    encoding: Encoding,
+) -> Result<(), CloudIoError> {
+    let err = |problem| CloudIoError::new(path, problem);
+    let format = match format {
+        Some(f) => f,
+        None => Format::from_path(path).map_err(err)?,
+    };
+    match format {
+        Format::Las | Format::Laz => las::write(path, cloud, format == Format::Laz),
+        Format::Ply => atomic_write(path, |w| ply::write(w, cloud, encoding)).map_err(Problem::Io),
+        Format::Pcd => atomic_write(path, |w| pcd::write(w, cloud, encoding)).map_err(Problem::Io),
+        Format::Xyz => atomic_write(path, |w| xyz::write(w, cloud)).map_err(Problem::Io),
+    }
+    .map_err(err)
+}
+
+/// Refuses an output that is one of the inputs (also through links), and an output whose
+/// directory does not exist.
+pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
+    let err = |problem| CloudIoError::new(output, problem);
+    let parent = match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !parent.is_dir() {
+        return Err(err(Problem::NoOutputDirectory(parent)));
+    }
+    let resolved = match (parent.canonicalize(), output.file_name()) {
+        (Ok(dir), Some(name)) => dir.join(name).canonicalize().unwrap_or(dir.join(name)),
+        _ => output.to_path_buf(),
+    };
+    for input in inputs {
+        if input.canonicalize().is_ok_and(|i| i == resolved) {
+            return Err(err(Problem::OverwritesInput));
+        }
+    }
+    Ok(())
+}
+
+/// Writes through `body` into a temporary file beside `path`, then renames it over `path`, so a
+/// failed or interrupted write never leaves a half-written output.
+pub fn atomic_write<F>(path: &Path, body: F) -> std::io::Result<()>
+where
+    F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
+{
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".mvpcc-")
+        .suffix(".tmp")
+        .tempfile_in(dir)?;
+    {
+        let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file());
+        body(&mut w)?;
+        w.flush()?;
+    }
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.
+fn fits_f32(cloud: &PointCloud) -> bool {
+    cloud
+        .positions
+        .iter()
+        .all(|p| p.iter().all(|&c| (c as f32) as f64 == c))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::{Attribute, ScalarKind};
+
+    fn colored_cloud(georeferenced: bool) -> PointCloud {
+        let base = if georeferenced {
+            [650_000.125, 5_270_000.5, 110.0]
+        } else {
+            [0.0; 3]
+        };
+        let n = 257;
+        PointCloud {
+            positions: (0..n)
+                .map(|i| {
+                    let t = i as f64;
+                    [
+                        base[0] + 0.001 * t,
+                        base[1] - 0.25 * t,
+                        base[2] + (t * 0.37).sin(),
+                    ]
+                })
+                .collect(),
+            colors: Some(
+                (0..n)
+                    .map(|i| [i as u8, (i * 7) as u8, 255 - i as u8])
+                    .collect(),
+            ),
+            attributes: vec![
+                Attribute {
+                    name: "intensity".into(),
+                    kind: ScalarKind::U16,
+                    values: (0..n).map(|i| (i * 100 % 65536) as f64).collect(),
+                },
+                Attribute {
+                    name: "classification".into(),
+                    kind: ScalarKind::U8,
+                    // Standard ASPRS classes; 12 ("overlap") is not a class in LAS 1.4 writers.
+                    values: (0..n).map(|i| (i % 10) as f64).collect(),
+                },
+            ],
+            quantization: None,
+        }
+    }
+
+    fn round_trip(ext: &str, encoding: Encoding, cloud: &PointCloud) -> PointCloud {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(format!("cloud.{ext}"));
+        write_cloud(&path, cloud, None, encoding).unwrap();
+        read_cloud(&path, None).unwrap().cloud
+    }
+
+    #[test]
+    fn ply_and_pcd_round_trip_exactly_in_every_encoding() {
+        for geo in [false, true] {
+            let cloud = colored_cloud(geo);
+            for ext in ["ply", "pcd"] {
+                for enc in [Encoding::Binary, Encoding::Ascii, Encoding::Compressed] {
+                    let back = round_trip(ext, enc, &cloud);
+                    assert_eq!(back.positions, cloud.positions, "{ext} {enc:?} geo={geo}");
+                    assert_eq!(back.colors, cloud.colors, "{ext} {enc:?}");
+                    assert_eq!(back.attributes, cloud.attributes, "{ext} {enc:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn xyz_round_trips_positions_and_colors() {
+        let cloud = colored_cloud(true);
+        let back = round_trip("xyz", Encoding::Binary, &cloud);
+        assert_eq!(back.positions, cloud.positions);
+        assert_eq!(back.colors, cloud.colors);
+    }
+
+    #[test]
+    fn las_and_laz_keep_colors_intensity_classification_and_quantization() {
+        let cloud = colored_cloud(true);
+        for ext in ["las", "laz"] {
+            let back = round_trip(ext, Encoding::Binary, &cloud);
+            let q = back.quantization.expect("LAS carries its quantization");
+            for (a, b) in cloud.positions.iter().zip(&back.positions) {
+                for i in 0..3 {
+                    assert!(
+                        (a[i] - b[i]).abs() <= q.scale[i] / 2.0 + 1e-9,
+                        "{a:?} vs {b:?}"
+                    );
+                }
+            }
+            assert_eq!(back.colors, cloud.colors, "{ext}");
+            assert_eq!(back.attribute("intensity"), cloud.attribute("intensity"));
+            assert_eq!(
+                back.attribute("classification"),
+                cloud.attribute("classification")
+            );
+            // Written again, the file keeps the scale and offset it was read with.
+            let again = round_trip(ext, Encoding::Binary, &back);
+            assert_eq!(again.quantization, back.quantization);
+            assert_eq!(again.positions, back.positions);
+        }
+    }
+
+    #[test]
+    fn format_follows_the_extension() {
+        assert_eq!(Format::from_path(Path::new("a.PLY")).unwrap(), Format::Ply);
+        assert_eq!(Format::from_path(Path::new("a.laz")).unwrap(), Format::Laz);
+        assert_eq!(Format::from_path(Path::new("a.csv")).unwrap(), Format::Xyz);
+        assert!(matches!(
+            Format::from_path(Path::new("a.obj")),
+            Err(Problem::UnsupportedExtension(e)) if e == "obj"
+        ));
+    }
+
+    #[test]
+    fn a_failed_write_leaves_no_file_behind() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.ply");
+        let result = atomic_write(&path, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("interrupted"))
+        });
+        assert!(result.is_err());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn output_equal_to_input_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.ply");
+        std::fs::write(&input, b"x").unwrap();
+        let err = check_output(&dir.path().join("./in.ply"), &[&input]).unwrap_err();
+        assert!(matches!(err.problem, Problem::OverwritesInput));
+        assert!(check_output(&dir.path().join("out.ply"), &[&input]).is_ok());
+        let err = check_output(&dir.path().join("missing/out.ply"), &[&input]).unwrap_err();
+        assert!(matches!(err.problem, Problem::NoOutputDirectory(_)));
+    }
+}

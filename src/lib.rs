@@ -1,0 +1,20 @@
+//! mvpcc: multi-view point cloud completion (MVPCC-Net) for mobile laser scans.
+//!
+//! The pipeline stages are modules of their own: [`io`] reads and writes clouds, [`frame`] maps a
+//! cloud into the unit box and back, [`camera`] and [`projection`] turn it into view images,
+//! [`views`] stores those images in the original dataset's PNG layout, [`reprojection`] and
+//! [`filter`] turn views back into a cloud, and [`metrics`] scores the result.
+
+pub mod camera;
+pub mod cli;
+pub mod cloud;
+pub mod commands;
+pub mod filter;
+pub mod frame;
+pub mod io;
+pub mod knn;
+pub mod metrics;
+pub mod projection;
+pub mod reprojection;
+pub mod shapes;
+pub mod views;

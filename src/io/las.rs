@@ -140,7 +140,8 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
     let tmp = tempfile::Builder::new()
         .prefix(".mvpcc-")
         .suffix(".tmp")
-        .tempfile_in(dir)?;
+        .tempfile_in(dir)
+        .map_err(super::write_problem)?;
     {
         let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
@@ -167,6 +168,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         }
         writer.close().map_err(las_problem)?;
     }
-    tmp.persist(path).map_err(|e| Problem::Io(e.error))?;
+    tmp.persist(path)
+        .map_err(|e| super::write_problem(e.error))?;
     Ok(())
 }

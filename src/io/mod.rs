@@ -74,8 +74,20 @@ pub enum Problem {
     OverwritesInput,
     #[error("output directory {} does not exist", .0.display())]
     NoOutputDirectory(PathBuf),
+    #[error("cannot write: {0}")]
+    Write(std::io::Error),
     #[error("{0}")]
     Io(#[from] std::io::Error),
+}
+
+/// A write error without the temporary file's name, which means nothing to the user.
+fn write_problem(e: std::io::Error) -> Problem {
+    Problem::Write(match (e.raw_os_error(), e.get_ref()) {
+        (Some(code), _) => std::io::Error::from_raw_os_error(code),
+        // tempfile wraps OS errors with its own path; the kind says the same without it.
+        (None, Some(_)) => std::io::Error::from(e.kind()),
+        (None, None) => e,
+    })
 }
 
 /// A problem with a named file; displays as `path: problem` on one line.
@@ -160,9 +172,13 @@ pub fn write_cloud(
     };
     match format {
         Format::Las | Format::Laz => las::write(path, cloud, format == Format::Laz),
-        Format::Ply => atomic_write(path, |w| ply::write(w, cloud, encoding)).map_err(Problem::Io),
-        Format::Pcd => atomic_write(path, |w| pcd::write(w, cloud, encoding)).map_err(Problem::Io),
-        Format::Xyz => atomic_write(path, |w| xyz::write(w, cloud)).map_err(Problem::Io),
+        Format::Ply => {
+            atomic_write(path, |w| ply::write(w, cloud, encoding)).map_err(write_problem)
+        }
+        Format::Pcd => {
+            atomic_write(path, |w| pcd::write(w, cloud, encoding)).map_err(write_problem)
+        }
+        Format::Xyz => atomic_write(path, |w| xyz::write(w, cloud)).map_err(write_problem),
     }
     .map_err(err)
 }

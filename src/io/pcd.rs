@@ -140,10 +140,12 @@ fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
                     Some("ascii") => Data::Ascii,
                     Some("binary") => Data::Binary,
                     Some("binary_compressed") => Data::Compressed,
-                    other => return Err(malformed(format!(
+                    other => {
+                        return Err(malformed(format!(
                         "unknown DATA encoding {:?} (expected ascii, binary or binary_compressed)",
                         other.unwrap_or("")
-                    ))),
+                    )))
+                    }
                 };
                 let names = names.ok_or_else(|| malformed("header has no FIELDS line"))?;
                 let n = names.len();

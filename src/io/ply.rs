@@ -104,19 +104,44 @@ impl PropertyAccess for Skipped {
     }
 }
 
-/// ply-rs messages span lines and tabs; the CLI promises one line per error.
+/// The text between `String: '` and the next `'` of a ply-rs message: the offending line.
+fn quoted_line(text: &str) -> Option<&str> {
+    let start = text.find("String: '")? + "String: '".len();
+    let len = text[start..].find('\'')?;
+    Some(text[start..start + len].trim())
+}
+
+/// `(expected N, got M)` of a ply-rs end-of-file message.
+fn expected_got(text: &str) -> Option<(usize, usize)> {
+    let start = text.find("(expected ")? + "(expected ".len();
+    let (expected, rest) = text[start..].split_once(", got ")?;
+    let got = rest.split(')').next()?;
+    Some((expected.trim().parse().ok()?, got.trim().parse().ok()?))
+}
+
+/// ply-rs messages span lines and embed parser internals; the CLI promises one clear line.
 fn one_line(e: &ply_rs_bw::parser::ParseError) -> Problem {
     let text = e
         .to_string()
         .split_whitespace()
         .collect::<Vec<_>>()
         .join(" ");
+    let line = e.line().map_or(String::new(), |l| format!("line {l}: "));
     if e.kind() == std::io::ErrorKind::UnexpectedEof {
-        return Problem::Malformed(format!("file ends early: {text}"));
+        return match expected_got(&text) {
+            Some((declared, found)) => Problem::Truncated { declared, found },
+            None => Problem::Malformed(format!("{line}file ends early")),
+        };
     }
-    match e.line() {
-        Some(line) => Problem::Malformed(format!("line {line}: {text}")),
-        None => Problem::Malformed(text),
+    match quoted_line(&text) {
+        Some(bad) if text.contains("element line") => Problem::Malformed(format!(
+            "{line}values {bad:?} do not match the header's properties"
+        )),
+        Some(bad) if bad.starts_with("format") => Problem::Malformed(format!(
+            "{line}unknown format line {bad:?} (expected ascii, binary_little_endian or binary_big_endian)"
+        )),
+        Some(bad) => Problem::Malformed(format!("{line}cannot parse header line {bad:?}")),
+        None => Problem::Malformed(format!("{line}{text}")),
     }
 }
 

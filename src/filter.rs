@@ -2,7 +2,7 @@
 //! `k` nearest neighbours *excluding itself* (PCL `setMeanK(k)`; Open3D's `nb_neighbors = k+1`);
 //! a point is kept when that mean is at most `μ + σ·std` over the cloud (std with n − 1).
 
-use crate::knn::KnnIndex;
+use crate::knn::knn_distances;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SorParams {
@@ -28,10 +28,9 @@ pub fn mean_neighbor_distances(points: &[[f64; 3]], k: usize) -> Vec<f64> {
         return vec![0.0; points.len()];
     }
     let k = k.min(points.len() - 1);
-    let index = KnnIndex::new(points);
     // The first neighbour is at distance 0: the point itself, or a duplicate of it, which is
     // the same distance either way; drop one zero.
-    let d = index.k_nearest_distances(points, k + 1);
+    let d = knn_distances(points, points, k + 1);
     d.chunks_exact(k + 1)
         .map(|row| row[1..].iter().sum::<f64>() / k as f64)
         .collect()

@@ -3,7 +3,7 @@
 //! un-halved `cd_l2`; precision, recall and F1 at thresholds τ with a strict `<`. Colour on view
 //! images: PSNR, SSIM and MAE.
 
-use crate::knn::KnnIndex;
+use crate::knn::knn_distances;
 use serde::Serialize;
 
 /// Precision, recall and F1 at one threshold.
@@ -38,10 +38,8 @@ pub struct Correspondence {
 impl Correspondence {
     /// Both clouds must be non-empty.
     pub fn new(pred: &[[f64; 3]], gt: &[[f64; 3]]) -> Correspondence {
-        let (pred_to_gt, gt_to_pred) = rayon::join(
-            || KnnIndex::new(gt).nearest_distances(pred),
-            || KnnIndex::new(pred).nearest_distances(gt),
-        );
+        let (pred_to_gt, gt_to_pred) =
+            rayon::join(|| knn_distances(gt, pred, 1), || knn_distances(pred, gt, 1));
         Correspondence {
             pred_to_gt,
             gt_to_pred,

@@ -70,8 +70,16 @@ impl Hasher for CellHasher {
             self.write_u64(b as u64);
         }
     }
+    /// MurmurHash3's finalizer: every key bit reaches the low bits the table indexes with
+    /// (a plain multiply would leave them to the x coordinate alone).
     fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x517c_c1b7_2722_0a95);
+        let mut h = self.0 ^ v;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^= h >> 33;
+        self.0 = h;
     }
 }
 

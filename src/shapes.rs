@@ -147,6 +147,11 @@ pub fn car(n: usize, seed: u64) -> Sampled {
     }
 }
 
+/// The car shipped as `assets/example/car_gt.ply` (its partial is [`scanned_side`] of it).
+pub fn example_car() -> Sampled {
+    car(16_000, 2026)
+}
+
 /// What a scanner driving past on the +x side sees: surfaces facing it (and the roof), nothing
 /// of the far flank or the underside; the body hides what lies beyond x = −0.6 m.
 pub fn scanned_side(sampled: &Sampled) -> PointCloud {

@@ -471,3 +471,15 @@ fn view_metrics_compare_colour_images() {
     assert_eq!(v["views"]["mae"], 0.0);
     assert!((v["views"]["ssim"].as_f64().unwrap() - 1.0).abs() < 1e-9);
 }
+
+#[test]
+fn shipped_example_is_what_the_generator_makes() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example");
+    let car = shapes::example_car();
+    let gt = read_cloud(&dir.join("car_gt.ply"), None).unwrap().cloud;
+    let partial = read_cloud(&dir.join("car_partial.ply"), None)
+        .unwrap()
+        .cloud;
+    assert_eq!(gt, car.cloud);
+    assert_eq!(partial, shapes::scanned_side(&car));
+}

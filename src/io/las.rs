@@ -133,15 +133,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         },
     };
     let header = builder.into_header().map_err(las_problem)?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".mvpcc-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(super::write_problem)?;
+    let tmp = super::temp_file_beside(path).map_err(super::write_problem)?;
     {
         let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;

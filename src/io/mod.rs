@@ -212,14 +212,7 @@ pub fn atomic_write<F>(path: &Path, body: F) -> std::io::Result<()>
 where
     F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
 {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let tmp = tempfile::Builder::new()
-        .prefix(".mvpcc-")
-        .suffix(".tmp")
-        .tempfile_in(dir)?;
+    let tmp = temp_file_beside(path)?;
     {
         let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file());
         body(&mut w)?;
@@ -227,6 +220,21 @@ where
     }
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(())
+}
+
+/// A temporary file in `path`'s directory (so the final rename stays on one file system),
+/// created with the permissions of an ordinary new file rather than tempfile's private 0600.
+fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    tempfile::Builder::new()
+        .prefix(".mvpcc-")
+        .suffix(".tmp")
+        .permissions(std::fs::Permissions::from_mode(0o666))
+        .tempfile_in(dir)
 }
 
 /// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.
@@ -348,6 +356,22 @@ mod tests {
             Format::from_path(Path::new("a.obj")),
             Err(Problem::UnsupportedExtension(e)) if e == "obj"
         ));
+    }
+
+    #[test]
+    fn outputs_get_ordinary_file_permissions() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.xyz");
+        write_cloud(&path, &colored_cloud(false), None, Encoding::Binary).unwrap();
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        let status = std::fs::read_to_string("/proc/self/status").unwrap();
+        let umask = status
+            .lines()
+            .find_map(|l| l.strip_prefix("Umask:"))
+            .map(|m| u32::from_str_radix(m.trim(), 8).unwrap())
+            .unwrap();
+        assert_eq!(mode, 0o666 & !umask, "{mode:o} with umask {umask:o}");
     }
 
     #[test]

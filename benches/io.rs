@@ -1,0 +1,33 @@
+use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use std::time::Duration;
+
+mod common;
+
+fn io(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let cloud = common::normalized_car(1_000_000, 3);
+    let mut group = c.benchmark_group("io");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(8));
+    for (name, encoding) in [
+        ("ply", Encoding::Binary),
+        ("pcd", Encoding::Binary),
+        ("xyz", Encoding::Ascii),
+    ] {
+        let path = dir.path().join(format!("car.{name}"));
+        write_cloud(&path, &cloud, None, encoding).unwrap();
+        group.bench_function(format!("read 1M-point {name} ({encoding:?})"), |b| {
+            b.iter(|| read_cloud(&path, None).unwrap())
+        });
+    }
+    let path = dir.path().join("write.ply");
+    group.bench_function("write 1M-point binary ply", |b| {
+        b.iter(|| write_cloud(&path, &cloud, None, Encoding::Binary).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, io);
+criterion_main!(benches);

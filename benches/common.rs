@@ -1,4 +1,4 @@
-//! Inputs shared by the benches: the largest real MLS car of the reference set when it is
+//! Inputs shared by the benches (each bench compiles this module and uses part of it): the largest real MLS car of the reference set when it is
 //! present, a generated car of the same size otherwise.
 
 use mvpcc::cloud::PointCloud;
@@ -8,6 +8,7 @@ use mvpcc::shapes;
 use std::path::PathBuf;
 
 /// A normalized car scan of about 35K points, and where it came from.
+#[allow(dead_code)]
 pub fn mls_car() -> (PointCloud, String) {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/clouds/mls");
     let largest = std::fs::read_dir(&dir).ok().and_then(|entries| {

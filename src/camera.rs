@@ -113,14 +113,14 @@ impl Camera {
 
     /// `[R | t]` as the original `cam_RT_NNN.txt` holds it (3 rows of 4).
     pub fn extrinsics(&self) -> [[f64; 4]; 3] {
-        let mut m = [[0.0; 4]; 3];
-        for (r, row) in m.iter_mut().enumerate() {
-            for c in 0..3 {
-                row[c] = self.rotation[(r, c)];
-            }
-            row[3] = self.translation[r];
-        }
-        m
+        [0, 1, 2].map(|r| {
+            [
+                self.rotation[(r, 0)],
+                self.rotation[(r, 1)],
+                self.rotation[(r, 2)],
+                self.translation[r],
+            ]
+        })
     }
 
     /// The f32 projector the hot loop uses.

@@ -64,6 +64,15 @@ pub struct SorOptions {
     pub sor_std: f64,
 }
 
+impl SorOptions {
+    pub fn params(&self) -> crate::filter::SorParams {
+        crate::filter::SorParams {
+            k: self.sor_k,
+            std_mul: self.sor_std,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Metric {
     /// Chamfer distances: cd_l2_half (the paper's), cd_l1 (PCN), cd_l2 (PoinTr).

@@ -74,10 +74,8 @@ impl Aabb {
             max: first,
         };
         for p in points {
-            for i in 0..3 {
-                b.min[i] = b.min[i].min(p[i]);
-                b.max[i] = b.max[i].max(p[i]);
-            }
+            b.min = [0, 1, 2].map(|i| b.min[i].min(p[i]));
+            b.max = [0, 1, 2].map(|i| b.max[i].max(p[i]));
         }
         Some(b)
     }

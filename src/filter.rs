@@ -68,7 +68,8 @@ mod tests {
                     .filter(|(j, _)| *j != i)
                     .map(|(_, q)| ((0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f64>()).sqrt())
                     .collect();
-                d.sort_by(f64::total_cmp);
+                d.select_nth_unstable_by(k - 1, f64::total_cmp);
+                d[..k].sort_by(f64::total_cmp);
                 d[..k].iter().sum::<f64>() / k as f64
             })
             .collect();
@@ -119,6 +120,29 @@ mod tests {
                 assert!(!got[got.len() - 1], "a far outlier is removed");
             }
         }
+    }
+
+    #[test]
+    fn matches_brute_force_on_a_scan_sized_surface() {
+        // Large enough for the grid search, with scan-line density changes and outliers.
+        let mut seed = 5;
+        let mut points: Vec<[f64; 3]> = (0..6000)
+            .map(|i| {
+                let line = (i % 60) as f64 / 60.0;
+                [
+                    lcg(&mut seed),
+                    0.3 * line + 0.002 * lcg(&mut seed),
+                    0.2 * lcg(&mut seed),
+                ]
+            })
+            .collect();
+        let dups: Vec<[f64; 3]> = points.iter().step_by(50).cloned().collect();
+        points.extend(dups);
+        points.extend([[2.0, 2.0, 2.0], [1.5, -1.0, 0.0], [0.5, 0.15, 0.6]]);
+        let params = SorParams::default();
+        let got = inliers(&points, params);
+        assert_eq!(got, reference(&points, params));
+        assert!(!got[got.len() - 3] && !got[got.len() - 2]);
     }
 
     #[test]

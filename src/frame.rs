@@ -64,7 +64,7 @@ impl Frame {
         let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
         let size = bounds.extent();
         let extent = size.iter().cloned().fold(0.0, f64::max);
-        if !(extent > 0.0) {
+        if extent.is_nan() || extent <= 0.0 {
             return Err(FrameError::ZeroExtent);
         }
         let upright = match up {

@@ -81,7 +81,7 @@ impl Grid {
         let mut c = [0; 3];
         for a in 0..3 {
             let f = ((p[a] - self.origin[a]) / self.cell).floor();
-            if !(f >= 0.0) || f as usize > self.dims[a] {
+            if f.is_nan() || f < 0.0 || f as usize > self.dims[a] {
                 return None;
             }
             c[a] = (f as usize).min(self.dims[a] - 1);
@@ -121,7 +121,7 @@ impl Grid {
         let cell = coarse * (per_cell / mean).sqrt();
         let dims = dims_for(cell);
         let total = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d))?;
-        if total > MAX_CELLS || !(cell > 0.0) {
+        if total > MAX_CELLS || cell.is_nan() || cell <= 0.0 {
             return None;
         }
         let mut grid = Grid {

@@ -136,7 +136,7 @@ mod tests {
                 vec![[0, 0, 255], [255, 0, 0]],
             ),
         ] {
-            let img = project(&points, Some(&colors), &[cam.clone()]);
+            let img = project(&points, Some(&colors), std::slice::from_ref(&cam));
             assert_eq!(img.occupied(), 1);
             let at = img.occupancy.iter().position(|o| *o).unwrap();
             let plane = 64 * 64;

@@ -87,7 +87,7 @@ impl Hasher for CellHasher {
 /// an earlier kept point. Grid cells of side 2·tolerance mean every point has to look at only
 /// the 8 cells nearest to it.
 pub fn dedup_indices(points: &[[f64; 3]], tolerance: f64) -> Vec<usize> {
-    if !(tolerance > 0.0) {
+    if tolerance.is_nan() || tolerance <= 0.0 {
         return (0..points.len()).collect();
     }
     let cell = 2.0 * tolerance;
@@ -145,7 +145,8 @@ pub fn dedup_indices(points: &[[f64; 3]], tolerance: f64) -> Vec<usize> {
 pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
     let size = views.size;
     let plane = size * size;
-    let per_view: Vec<(Vec<[f64; 3]>, Vec<[u8; 3]>)> = (0..views.views())
+    type ViewPoints = (Vec<[f64; 3]>, Vec<[u8; 3]>);
+    let per_view: Vec<ViewPoints> = (0..views.views())
         .into_par_iter()
         .map(|v| {
             let mask = erode(views.view_occupancy(v), size, options.erode);
@@ -207,7 +208,7 @@ mod tests {
         assert_eq!(on, want);
         assert_eq!(erode(&mask, size, 0), mask);
         // The border counts as foreground.
-        assert!(erode(&vec![true; 64], 8, 3).iter().all(|b| *b));
+        assert!(erode(&[true; 64], 8, 3).iter().all(|b| *b));
     }
 
     #[test]

@@ -47,6 +47,20 @@ fn fails(args: &[&str], names: &str, problem: &str, output: &Path) {
     assert!(!output.exists(), "{} must not be written", output.display());
 }
 
+/// Runs `mvpcc eval … --json` and parses what it prints.
+fn eval_json(args: &[&str]) -> serde_json::Value {
+    let out = mvpcc()
+        .arg("eval")
+        .args(args)
+        .arg("--json")
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    serde_json::from_slice(&out).unwrap()
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -56,23 +70,7 @@ fn eval_reproduces_the_reference_fixture() {
     let dir = TempDir::new().unwrap();
     let p = write_bytes(&dir, "p.xyz", b"0 0 0\n0.006 0 0\n1 1 1\n0 0 0.01\n");
     let g = write_bytes(&dir, "g.xyz", b"0 0 0\n0 0.008 0\n");
-    let out = mvpcc()
-        .args([
-            "eval",
-            "--metrics",
-            "cd,f1",
-            "--pred",
-            s(&p),
-            "--gt",
-            s(&g),
-            "--json",
-        ])
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    let v = eval_json(&["--metrics", "cd,f1", "--pred", s(&p), "--gt", s(&g)]);
     let pair = &v["pairs"][0];
     assert!((pair["cd_l2_half"].as_f64().unwrap() - 0.373041).abs() < 1e-12);
     assert!((pair["cd_l1"].as_f64().unwrap() - 0.219930544).abs() < 1e-9);
@@ -116,23 +114,14 @@ fn eval_over_directories_matches_by_stem() {
         )
         .unwrap();
     }
-    let out = mvpcc()
-        .args([
-            "eval",
-            "--pred-dir",
-            s(&pred),
-            "--gt-dir",
-            s(&gt),
-            "--json",
-            "--normalize",
-            "gt-box",
-        ])
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    let v = eval_json(&[
+        "--pred-dir",
+        s(&pred),
+        "--gt-dir",
+        s(&gt),
+        "--normalize",
+        "gt-box",
+    ]);
     assert_eq!(v["pairs"].as_array().unwrap().len(), 2);
     assert_eq!(v["normalization"], "gt-box");
     let recall = v["mean"]["fscore"][0]["recall"].as_f64().unwrap();
@@ -277,62 +266,35 @@ fn bad_inputs_fail_cleanly() {
         &out,
     );
 
-    let empty = write_bytes(&dir, "empty.pcd", b"");
-    fails(&["filter", s(&empty), o], "empty.pcd", "empty", &out);
-
-    let zero = write_bytes(
-        &dir,
-        "zero.ply",
-        b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
-    );
-    fails(&["filter", s(&zero), o], "zero.ply", "no points", &out);
-
-    let claims = write_bytes(
-        &dir,
-        "claims.pcd",
-        b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 5\nHEIGHT 1\nPOINTS 5\nDATA ascii\n1 2 3\n4 5 6\n",
-    );
-    fails(
-        &["filter", s(&claims), o],
-        "claims.pcd",
-        "declares 5 points",
-        &out,
-    );
-
-    let cut = write_bytes(&dir, "cut.ply", &truncated);
-    fails(
-        &["filter", s(&cut), o],
-        "cut.ply",
-        "declares 3 points but the file holds only 1",
-        &out,
-    );
-
-    let format = write_bytes(
-        &dir,
-        "format.ply",
-        b"ply\nformat binary_middle_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n",
-    );
-    fails(
-        &["filter", s(&format), o],
-        "format.ply",
-        "unknown format line",
-        &out,
-    );
-
-    let token = write_bytes(&dir, "token.xyz", b"0 0 0\n1 x 1\n");
-    fails(&["filter", s(&token), o], "token.xyz", "not a number", &out);
-
-    let token_ply = write_bytes(
-        &dir,
-        "token.ply",
-        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 abc 3\n",
-    );
-    fails(
-        &["filter", s(&token_ply), o],
-        "token.ply",
-        "do not match the header",
-        &out,
-    );
+    let cases: [(&str, &[u8], &str); 7] = [
+        ("empty.pcd", b"", "empty"),
+        (
+            "zero.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+            "no points",
+        ),
+        (
+            "claims.pcd",
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 5\nHEIGHT 1\nPOINTS 5\nDATA ascii\n1 2 3\n4 5 6\n",
+            "declares 5 points",
+        ),
+        ("cut.ply", &truncated, "declares 3 points but the file holds only 1"),
+        (
+            "format.ply",
+            b"ply\nformat binary_middle_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n",
+            "unknown format line",
+        ),
+        ("token.xyz", b"0 0 0\n1 x 1\n", "not a number"),
+        (
+            "token.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 abc 3\n",
+            "do not match the header",
+        ),
+    ];
+    for (name, bytes, problem) in cases {
+        let input = write_bytes(&dir, name, bytes);
+        fails(&["filter", s(&input), o], name, problem, &out);
+    }
 
     let all_nan = write_bytes(&dir, "allnan.xyz", b"nan 0 0\n0 inf 0\n");
     fails(
@@ -428,46 +390,28 @@ fn view_metrics_compare_colour_images() {
             .assert()
             .success();
     }
-    let out = mvpcc()
-        .args([
-            "eval",
-            "--metrics",
-            "psnr,ssim,mae",
-            "--pred-views",
-            s(&pv),
-            "--gt-views",
-            s(&gv),
-            "--json",
-        ])
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    let v = eval_json(&[
+        "--metrics",
+        "psnr,ssim,mae",
+        "--pred-views",
+        s(&pv),
+        "--gt-views",
+        s(&gv),
+    ]);
     let views = &v["views"];
     assert_eq!(views["cameras"], serde_json::json!([5, 6, 7, 8]));
     let psnr = views["psnr_db"].as_f64().unwrap();
     assert!(psnr.is_finite() && psnr > 5.0, "{v}");
     assert!(views["mae"].as_f64().unwrap() > 0.0);
     // Against itself, perfect.
-    let out = mvpcc()
-        .args([
-            "eval",
-            "--metrics",
-            "ssim,mae",
-            "--pred-views",
-            s(&gv),
-            "--gt-views",
-            s(&gv),
-            "--json",
-        ])
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
-    let v: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    let v = eval_json(&[
+        "--metrics",
+        "ssim,mae",
+        "--pred-views",
+        s(&gv),
+        "--gt-views",
+        s(&gv),
+    ]);
     assert_eq!(v["views"]["mae"], 0.0);
     assert!((v["views"]["ssim"].as_f64().unwrap() - 1.0).abs() < 1e-9);
 }

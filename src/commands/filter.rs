@@ -1,19 +1,12 @@
 use super::{load, Log};
 use crate::cli::FilterArgs;
-use crate::filter::{inliers, SorParams};
+use crate::filter::inliers;
 use crate::io::{check_output, write_cloud};
 
 pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
     check_output(&args.output, &[&args.input])?;
     let cloud = load(&args.input, args.input_options.format, log)?;
-    let keep = inliers(
-        &cloud.positions,
-        SorParams {
-            k: args.sor.sor_k,
-            std_mul: args.sor.sor_std,
-        },
-    );
-    let filtered = cloud.filter(&keep);
+    let filtered = cloud.filter(&inliers(&cloud.positions, args.sor.params()));
     write_cloud(
         &args.output,
         &filtered,

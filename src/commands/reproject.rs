@@ -1,7 +1,7 @@
 use super::project::{ViewsInfo, INFO_FILE};
 use super::Log;
 use crate::cli::ReprojectArgs;
-use crate::filter::{inliers, SorParams};
+use crate::filter::inliers;
 use crate::io::{check_output, write_cloud};
 use crate::reprojection::{reproject, ReprojectOptions};
 use crate::views::{find_views, locations_path, read_views};
@@ -34,14 +34,7 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
             args.viewdir.display()
         );
     }
-    let keep = inliers(
-        &merged.positions,
-        SorParams {
-            k: args.sor.sor_k,
-            std_mul: args.sor.sor_std,
-        },
-    );
-    let filtered = merged.filter(&keep);
+    let filtered = merged.filter(&inliers(&merged.positions, args.sor.params()));
     let info_path = args.viewdir.join(INFO_FILE);
     let output = if !args.normalized && info_path.exists() {
         let text =

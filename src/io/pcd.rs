@@ -322,7 +322,7 @@ fn decompress(body: &[u8], points: usize, record: usize) -> Result<Vec<u8>, Prob
     }
     let compressed = u32::from_le_bytes(body[0..4].try_into().unwrap()) as usize;
     let uncompressed = u32::from_le_bytes(body[4..8].try_into().unwrap()) as usize;
-    let expected = points.checked_mul(record).unwrap_or(usize::MAX);
+    let expected = points.saturating_mul(record);
     if uncompressed != expected {
         return Err(malformed(format!(
             "binary_compressed body holds {uncompressed} bytes but the header's {points} points need {expected}"

@@ -2,7 +2,6 @@
 //! each camera looking at the origin with image x horizontal.
 
 use nalgebra::{Matrix3, Vector3};
-use std::path::Path;
 use thiserror::Error;
 
 /// Number of cameras in the rig.
@@ -197,31 +196,31 @@ pub fn parse_view_set(text: &str) -> Result<Vec<usize>, CameraError> {
     Ok(views)
 }
 
-/// Reads an original `cam_RT_NNN.txt` (3 rows of `R | t`).
-pub fn read_extrinsics(path: &Path) -> std::io::Result<[[f64; 4]; 3]> {
-    let text = std::fs::read_to_string(path)?;
-    let values: Vec<f64> = text
-        .split_whitespace()
-        .map(|t| t.parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
-    if values.len() != 12 {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!("expected 12 numbers, found {}", values.len()),
-        ));
-    }
-    let mut m = [[0.0; 4]; 3];
-    for (k, v) in values.into_iter().enumerate() {
-        m[k / 4][k % 4] = v;
-    }
-    Ok(m)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::path::PathBuf;
+    use std::path::{Path, PathBuf};
+
+    /// Reads an original `cam_RT_NNN.txt` (3 rows of `R | t`).
+    fn read_extrinsics(path: &Path) -> std::io::Result<[[f64; 4]; 3]> {
+        let text = std::fs::read_to_string(path)?;
+        let values: Vec<f64> = text
+            .split_whitespace()
+            .map(|t| t.parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidData, e))?;
+        if values.len() != 12 {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("expected 12 numbers, found {}", values.len()),
+            ));
+        }
+        let mut m = [[0.0; 4]; 3];
+        for (k, v) in values.into_iter().enumerate() {
+            m[k / 4][k % 4] = v;
+        }
+        Ok(m)
+    }
 
     fn reference_cameras() -> Option<PathBuf> {
         let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/cameras");

@@ -27,14 +27,6 @@ impl KnnIndex {
         }
     }
 
-    pub fn len(&self) -> usize {
-        self.len
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
     /// For each query, the Euclidean distances to its `k` nearest indexed points, ascending,
     /// written into `out[q * k..(q + 1) * k]`; fewer than `k` indexed points leave the tail
     /// as `f64::NAN`.

@@ -5,7 +5,7 @@
 use crate::camera::RIG_SIZE;
 use crate::io::atomic_write;
 use crate::projection::{ViewImages, CHANNELS};
-use image::{ImageBuffer, ImageEncoder, Rgb};
+use image::ImageEncoder;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -236,22 +236,23 @@ pub fn read_views(dir: &Path, cameras: Option<&[usize]>) -> Result<ViewImages, V
     Ok(images.expect("find_views returns at least one camera"))
 }
 
-/// Raw 16-bit samples of a `locations_NNN.png`, for bit-exact comparisons.
-pub fn read_location_codes(path: &Path) -> Result<ImageBuffer<Rgb<u16>, Vec<u16>>, ViewError> {
-    match open(path)? {
-        image::DynamicImage::ImageRgb16(buf) => Ok(buf),
-        other => Err(ViewError::Invalid {
-            path: path.to_path_buf(),
-            problem: format!("expected a 16-bit RGB image, found {:?}", other.color()),
-        }),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::camera::Camera;
     use crate::projection::project;
+    use image::{ImageBuffer, Rgb};
+
+    /// Raw 16-bit samples of a `locations_NNN.png`, for bit-exact comparisons.
+    fn read_location_codes(path: &Path) -> Result<ImageBuffer<Rgb<u16>, Vec<u16>>, ViewError> {
+        match open(path)? {
+            image::DynamicImage::ImageRgb16(buf) => Ok(buf),
+            other => Err(ViewError::Invalid {
+                path: path.to_path_buf(),
+                problem: format!("expected a 16-bit RGB image, found {:?}", other.color()),
+            }),
+        }
+    }
 
     #[test]
     fn every_code_survives_decode_and_encode() {

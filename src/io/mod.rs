@@ -183,7 +183,7 @@ pub fn write_cloud(
     .map_err(err)
 }
 
-/// Refuses an output that is one of the inputs (also through links), and an output whose
+/// Refuses an output that is one of the inputs (also through symbolic links), and an output whose
 /// directory does not exist.
 pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
     let err = |problem| CloudIoError::new(output, problem);

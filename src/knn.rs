@@ -52,11 +52,22 @@ impl KnnIndex {
     }
 }
 
-/// Most cells a grid may have before the k-d tree is used for everything (a cloud with far
-/// outliers has a huge, mostly empty box).
-const MAX_CELLS: usize = 1 << 25;
+/// Most cells a grid may have per point before the k-d tree is used for everything (a cloud
+/// with far outliers has a huge, mostly empty box); keeps the grid under ~64 bytes a point.
+const MAX_CELLS_PER_POINT: usize = 16;
 /// Below this many points the grid does not pay for itself.
 const MIN_GRID_POINTS: usize = 4096;
+
+/// Per-thread scratch: the block's candidates (structure of arrays, so distances vectorize)
+/// and one query's distances.
+#[derive(Default)]
+struct Scratch {
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    zs: Vec<f64>,
+    d2: Vec<f64>,
+    near: Vec<f64>,
+}
 
 struct Grid {
     origin: [f64; 3],
@@ -90,6 +101,7 @@ impl Grid {
     /// as much as they are queried), assuming the points sample surfaces (occupancy grows with
     /// the square of the cell size).
     fn build(points: &[[f64; 3]], per_cell: f64) -> Option<Grid> {
+        let max_cells = MAX_CELLS_PER_POINT * points.len();
         let b = crate::cloud::Aabb::of(points)?;
         let e = b.extent();
         let volume: f64 = e.iter().map(|v| v.max(1e-9)).product();
@@ -98,7 +110,7 @@ impl Grid {
         let seen_occupancy = |cell: f64| -> Option<f64> {
             let dims = dims_for(cell);
             let total = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d))?;
-            if total > MAX_CELLS {
+            if total > max_cells {
                 return None;
             }
             let mut counts = vec![0u32; total];
@@ -113,7 +125,7 @@ impl Grid {
         let cell = coarse * (per_cell / mean).sqrt();
         let dims = dims_for(cell);
         let total = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d))?;
-        if total > MAX_CELLS || cell.is_nan() || cell <= 0.0 {
+        if total > max_cells || cell.is_nan() || cell <= 0.0 {
             return None;
         }
         let mut grid = Grid {
@@ -141,20 +153,7 @@ impl Grid {
         }
         Some(grid)
     }
-}
 
-/// Per-thread scratch: the block's candidates (structure of arrays, so distances vectorize)
-/// and one query's distances.
-#[derive(Default)]
-struct Scratch {
-    xs: Vec<f64>,
-    ys: Vec<f64>,
-    zs: Vec<f64>,
-    d2: Vec<f64>,
-    near: Vec<f64>,
-}
-
-impl Grid {
     /// Loads the points of the 3×3×3 block around cell `c` into the scratch.
     fn load_block(&self, c: [usize; 3], s: &mut Scratch) {
         s.xs.clear();
@@ -192,15 +191,8 @@ impl Grid {
     }
 
     /// The k smallest distances from `q` to the loaded block, ascending, into `out`, when they
-    /// are provably the k smallest of the whole cloud.
-    fn block_knn(
-        &self,
-        q: &[f64; 3],
-        c: [usize; 3],
-        k: usize,
-        s: &mut Scratch,
-        out: &mut [f64],
-    ) -> bool {
+    /// are provably the k smallest of the whole cloud; otherwise `out` is left as it was.
+    fn block_knn(&self, q: &[f64; 3], c: [usize; 3], k: usize, s: &mut Scratch, out: &mut [f64]) {
         let n = s.xs.len();
         s.d2.resize(n, 0.0);
         for i in 0..n {
@@ -211,7 +203,7 @@ impl Grid {
         s.near.clear();
         s.near.extend(s.d2.iter().copied().filter(|&d| d <= guard2));
         if s.near.len() < k {
-            return false;
+            return;
         }
         if s.near.len() > k {
             s.near.select_nth_unstable_by(k - 1, f64::total_cmp);
@@ -220,7 +212,6 @@ impl Grid {
         for (o, d) in out.iter_mut().zip(&s.near[..k]) {
             *o = d.sqrt();
         }
-        true
     }
 }
 
@@ -255,39 +246,43 @@ pub fn knn_distances(points: &[[f64; 3]], queries: &[[f64; 3]], k: usize) -> Vec
         .collect();
     order.sort_unstable();
     let groups: Vec<&[(u32, u32)]> = order.chunk_by(|a, b| a.0 == b.0).collect();
-    let results: Vec<(Vec<f64>, Vec<u32>)> = groups
+    // Results in query-sorted order, one disjoint slice per group, so the parallel pass writes
+    // straight into one buffer; a slot left NaN is a query the block could not settle (the grid
+    // is only used when there are at least k points, so NaN means nothing else).
+    let mut by_order = vec![f64::NAN; queries.len() * k];
+    let mut slices = Vec::with_capacity(groups.len());
+    let mut rest = by_order.as_mut_slice();
+    for group in &groups {
+        let (head, tail) = rest.split_at_mut(group.len() * k);
+        slices.push(head);
+        rest = tail;
+    }
+    groups
         .par_iter()
+        .zip(slices.into_par_iter())
         .with_min_len(16)
-        .map_init(Scratch::default, |scratch, group| {
-            let mut found = vec![f64::NAN; group.len() * k];
-            let mut missed = Vec::new();
-            let cell = group[0].0;
-            let coords = (cell != u32::MAX)
+        .for_each_init(Scratch::default, |scratch, (group, found)| {
+            let Some(c) = (group[0].0 != u32::MAX)
                 .then(|| grid.cell_coords(&queries[group[0].1 as usize]))
-                .flatten();
-            match coords {
-                Some(c) => {
-                    grid.load_block(c, scratch);
-                    for (j, &(_, i)) in group.iter().enumerate() {
-                        let q = &queries[i as usize];
-                        if !grid.block_knn(q, c, k, scratch, &mut found[j * k..(j + 1) * k]) {
-                            missed.push(i);
-                        }
-                    }
-                }
-                None => missed.extend(group.iter().map(|&(_, i)| i)),
+                .flatten()
+            else {
+                return;
+            };
+            grid.load_block(c, scratch);
+            for (j, &(_, i)) in group.iter().enumerate() {
+                let q = &queries[i as usize];
+                grid.block_knn(q, c, k, scratch, &mut found[j * k..(j + 1) * k]);
             }
-            (found, missed)
-        })
-        .collect();
+        });
     let mut out = vec![f64::NAN; queries.len() * k];
     let mut missed = Vec::new();
-    for (group, (found, group_missed)) in groups.iter().zip(results) {
-        for (j, &(_, i)) in group.iter().enumerate() {
-            let i = i as usize;
-            out[i * k..(i + 1) * k].copy_from_slice(&found[j * k..(j + 1) * k]);
+    for (j, &(_, i)) in order.iter().enumerate() {
+        let (i, found) = (i as usize, &by_order[j * k..(j + 1) * k]);
+        if found[0].is_nan() {
+            missed.push(i);
+        } else {
+            out[i * k..(i + 1) * k].copy_from_slice(found);
         }
-        missed.extend(group_missed.into_iter().map(|i| i as usize));
     }
     if !missed.is_empty() {
         let index = KnnIndex::new(points);

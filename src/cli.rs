@@ -2,8 +2,10 @@
 //! here; what they do lives in [`crate::commands`].
 
 use crate::camera::{parse_view_set, DEFAULT_VIEWS};
+use crate::device::DeviceChoice;
 use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
+use crate::model::{Channels, ModelConfig, Padding, Preset};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -32,6 +34,8 @@ pub enum Command {
     Reproject(ReprojectArgs),
     /// Statistical outlier removal (PCL's StatisticalOutlierRemoval) as a tool of its own.
     Filter(FilterArgs),
+    /// Time the network's forward pass on random input, by layer kind.
+    Profile(ProfileArgs),
 }
 
 /// How an input file is read.
@@ -207,4 +211,50 @@ pub struct FilterArgs {
     pub input_options: InputOptions,
     #[command(flatten)]
     pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct ProfileArgs {
+    /// Model shape (a preset; the options below override its fields).
+    #[arg(long, value_enum, default_value_t = Preset::Cpu)]
+    pub config: Preset,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// View image side in pixels.
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Channels after the first convolution.
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// Residual blocks in the encoder.
+    #[arg(long)]
+    pub res_blocks: Option<usize>,
+    #[arg(long)]
+    pub views: Option<usize>,
+    #[arg(long, value_enum)]
+    pub channels: Option<Channels>,
+    #[arg(long, value_enum)]
+    pub padding: Option<Padding>,
+    /// Objects per forward pass.
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// Timed forward passes, after one untimed warm-up; the layer breakdown takes as many more.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Print the results as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl ProfileArgs {
+    pub fn model_config(&self) -> ModelConfig {
+        let mut c = self.config.config();
+        c.size = self.size.unwrap_or(c.size);
+        c.width = self.width.unwrap_or(c.width);
+        c.res_blocks = self.res_blocks.unwrap_or(c.res_blocks);
+        c.views = self.views.unwrap_or(c.views);
+        c.channels = self.channels.unwrap_or(c.channels);
+        c.padding = self.padding.unwrap_or(c.padding);
+        c
+    }
 }

@@ -3,17 +3,21 @@
 //! The pipeline stages are modules of their own: [`io`] reads and writes clouds, [`frame`] maps a
 //! cloud into the unit box and back, [`camera`] and [`projection`] turn it into view images,
 //! [`views`] stores those images in the original dataset's PNG layout, [`reprojection`] and
-//! [`filter`] turn views back into a cloud, and [`metrics`] scores the result.
+//! [`filter`] turn views back into a cloud, and [`metrics`] scores the result. [`model`] is the
+//! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
 
 pub mod camera;
 pub mod cli;
 pub mod cloud;
 pub mod commands;
+pub mod device;
 pub mod filter;
 pub mod frame;
+pub mod inpaint;
 pub mod io;
 pub mod knn;
 pub mod metrics;
+pub mod model;
 pub mod projection;
 pub mod reprojection;
 pub mod shapes;

@@ -427,3 +427,60 @@ fn shipped_example_is_what_the_generator_makes() {
     assert_eq!(gt, car.cloud);
     assert_eq!(partial, shapes::scanned_side(&car));
 }
+
+#[test]
+fn profile_reports_a_median_and_a_breakdown() {
+    let assert = mvpcc()
+        .args([
+            "profile", "--config", "tiny", "--runs", "2", "--device", "gpu",
+        ])
+        .assert()
+        .success();
+    let out = assert.get_output();
+    let stdout = String::from_utf8(out.stdout.clone()).unwrap();
+    let last = stdout.lines().last().unwrap();
+    let ms: f64 = last
+        .strip_prefix("forward_ms_median=")
+        .unwrap_or_else(|| panic!("last line {last:?}"))
+        .parse()
+        .unwrap();
+    assert!(ms > 0.0);
+    for kind in [
+        "conv 7x7",
+        "conv 3x3 residual",
+        "instance norm",
+        "reflect pad",
+    ] {
+        assert!(stdout.contains(kind), "{kind} missing from {stdout}");
+    }
+    // A CPU-only build asked for a GPU says so once on stderr and goes on.
+    let stderr = String::from_utf8(out.stderr.clone()).unwrap();
+    if !cfg!(feature = "wgpu") {
+        assert!(stderr.contains("warning: this mvpcc was built without GPU support"));
+    }
+
+    let json = mvpcc()
+        .args(["profile", "--config", "tiny", "--runs", "1", "--json"])
+        .args(["--channels", "xyz", "--padding", "zero", "--views", "2"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
+    assert_eq!(json["config"]["channels"], "xyz");
+    assert_eq!(json["config"]["views"], 2);
+    assert!(json["forward_ms_median"].as_f64().unwrap() > 0.0);
+    assert!(json["layers_ms"].get("reflect pad").is_none());
+}
+
+#[test]
+fn profile_refuses_a_size_the_network_cannot_take() {
+    let none = Path::new("never-written");
+    fails(
+        &["profile", "--config", "tiny", "--size", "30"],
+        "model config",
+        "not a multiple of 4",
+        none,
+    );
+}

@@ -2,6 +2,7 @@
 
 mod eval;
 mod filter;
+mod profile;
 mod project;
 mod reproject;
 
@@ -18,6 +19,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Project(args) => project::run(args, log),
         Command::Reproject(args) => reproject::run(args, log),
         Command::Filter(args) => filter::run(args, log),
+        Command::Profile(args) => profile::run(args, log),
     }
 }
 

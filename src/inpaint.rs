@@ -1,0 +1,239 @@
+//! View images in, completed view images out: the bridge between the geometry pipeline
+//! ([`ViewImages`]) and the network ([`Generator`]).
+
+use crate::model::weights::{generator_from_bytes, WeightsError};
+use crate::model::{Channels, Generator, ModelConfig};
+use crate::projection::{ViewImages, CHANNELS};
+use burn::tensor::{Device, Tensor, TensorData};
+use thiserror::Error;
+
+#[derive(Debug, Error, PartialEq)]
+pub enum InpaintError {
+    #[error("object {object} has {found} views, the model takes {expected}")]
+    Views {
+        object: usize,
+        found: usize,
+        expected: usize,
+    },
+    #[error(
+        "object {object} has {found}×{found} pixel views, the model takes {expected}×{expected}"
+    )]
+    Size {
+        object: usize,
+        found: usize,
+        expected: usize,
+    },
+}
+
+pub struct Inpainter {
+    generator: Generator,
+    config: ModelConfig,
+    device: Device,
+}
+
+impl Inpainter {
+    pub fn new(generator: Generator, config: ModelConfig, device: Device) -> Inpainter {
+        Inpainter {
+            generator,
+            config,
+            device,
+        }
+    }
+
+    /// Loads a generator weights file (see [`crate::model::weights`]).
+    pub fn from_bytes(bytes: &[u8], device: Device) -> Result<Inpainter, WeightsError> {
+        let (generator, config) = generator_from_bytes(bytes, &device)?;
+        Ok(Inpainter::new(generator, config, device))
+    }
+
+    pub fn config(&self) -> &ModelConfig {
+        &self.config
+    }
+
+    /// Completes a batch of objects in one forward pass. Every pixel of the output comes from
+    /// the network: it is occupied where the predicted occupancy exceeds one half, and holds
+    /// the predicted geometry (and colour, for an XYZRGB model given coloured views).
+    pub fn inpaint(&self, batch: &[ViewImages]) -> Result<Vec<ViewImages>, InpaintError> {
+        if batch.is_empty() {
+            return Ok(Vec::new());
+        }
+        let input = self.input_tensor(batch)?; // [B, V, C+1, S, S]
+        let output = self.generator.forward(input);
+        let images = output
+            .images
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("the generator returns f32");
+        let logits = output
+            .occupancy
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("the generator returns f32");
+        Ok(self.output_views(batch, &images, &logits))
+    }
+
+    /// # Shapes
+    /// → `[batch, views, channels + 1, S, S]`
+    fn input_tensor(&self, batch: &[ViewImages]) -> Result<Tensor<5>, InpaintError> {
+        let (v, s) = (self.config.views, self.config.size);
+        let c = self.config.channels.count();
+        for (object, views) in batch.iter().enumerate() {
+            if views.views() != v {
+                return Err(InpaintError::Views {
+                    object,
+                    found: views.views(),
+                    expected: v,
+                });
+            }
+            if views.size != s {
+                return Err(InpaintError::Size {
+                    object,
+                    found: views.size,
+                    expected: s,
+                });
+            }
+        }
+        let plane = s * s;
+        let mut data = Vec::with_capacity(batch.len() * v * (c + 1) * plane);
+        for views in batch {
+            for view in 0..v {
+                let px = views.view_pixels(view);
+                let occupied = views.view_occupancy(view);
+                for ch in 0..c {
+                    let src = &px[ch * plane..(ch + 1) * plane];
+                    // Geometry is shifted into [0, 1] like the dataset's PNGs; empty stays 0.
+                    let shift = if ch < 3 { 0.5 } else { 0.0 };
+                    data.extend(
+                        src.iter()
+                            .zip(occupied)
+                            .map(|(&x, &o)| if o { x + shift } else { 0.0 }),
+                    );
+                }
+                data.extend(occupied.iter().map(|&o| if o { 1.0f32 } else { 0.0 }));
+            }
+        }
+        let shape = [batch.len(), v, c + 1, s, s];
+        Ok(Tensor::from_data(
+            TensorData::new(data, shape),
+            &self.device,
+        ))
+    }
+
+    fn output_views(
+        &self,
+        batch: &[ViewImages],
+        images: &[f32],
+        logits: &[f32],
+    ) -> Vec<ViewImages> {
+        let (v, s) = (self.config.views, self.config.size);
+        let c = self.config.channels.count();
+        let plane = s * s;
+        batch
+            .iter()
+            .enumerate()
+            .map(|(b, input)| {
+                let has_color = self.config.channels == Channels::Xyzrgb && input.has_color;
+                let mut out = ViewImages::empty(input.cameras.clone(), s, has_color);
+                for view in 0..v {
+                    let object_view = b * v + view;
+                    let logit = &logits[object_view * plane..(object_view + 1) * plane];
+                    let img = &images[object_view * c * plane..(object_view + 1) * c * plane];
+                    let px =
+                        &mut out.pixels[view * CHANNELS * plane..(view + 1) * CHANNELS * plane];
+                    let occ = &mut out.occupancy[view * plane..(view + 1) * plane];
+                    for at in 0..plane {
+                        if logit[at] <= 0.0 {
+                            continue;
+                        }
+                        occ[at] = true;
+                        for ch in 0..3 {
+                            px[ch * plane + at] = img[ch * plane + at] - 0.5;
+                        }
+                        if has_color {
+                            for ch in 3..6 {
+                                px[ch * plane + at] = img[ch * plane + at];
+                            }
+                        }
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::model::weights::generator_to_bytes;
+    use crate::model::Preset;
+    use crate::projection::project;
+    use crate::shapes::example_car;
+
+    fn car_views(size: usize) -> ViewImages {
+        let car = example_car();
+        let frame = crate::frame::Frame::fit(&car.cloud, crate::frame::UpAxis::Y).unwrap();
+        let normalized = frame.normalize(&car.cloud);
+        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, size).unwrap();
+        project(
+            &normalized.positions_f32(),
+            normalized.colors.as_deref(),
+            &cameras,
+        )
+    }
+
+    #[test]
+    fn views_in_views_out_with_valid_geometry() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        let bytes = generator_to_bytes(&g, &config).unwrap();
+        let inpainter = Inpainter::from_bytes(&bytes, device).unwrap();
+        let views = car_views(32);
+        let out = inpainter.inpaint(&[views.clone(), views.clone()]).unwrap();
+        assert_eq!(out.len(), 2);
+        for o in &out {
+            assert_eq!((o.views(), o.size), (4, 32));
+            assert_eq!(o.cameras, views.cameras);
+            assert_eq!(o.has_color, views.has_color);
+            let plane = 32 * 32;
+            for v in 0..4 {
+                let px = o.view_pixels(v);
+                for (at, &occ) in o.view_occupancy(v).iter().enumerate() {
+                    for ch in 0..3 {
+                        let x = px[ch * plane + at];
+                        if occ {
+                            assert!((-0.5..=0.5).contains(&x));
+                        } else {
+                            assert_eq!(x, 0.0);
+                        }
+                    }
+                }
+            }
+        }
+        // The same object twice in one batch comes out the same.
+        assert_eq!(out[0].pixels, out[1].pixels);
+    }
+
+    #[test]
+    fn wrong_view_count_or_size_is_an_error() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let inpainter = Inpainter::new(config.init_generator(&device).unwrap(), config, device);
+        let wrong_size = car_views(64);
+        assert_eq!(
+            inpainter.inpaint(&[wrong_size]).err(),
+            Some(InpaintError::Size {
+                object: 0,
+                found: 64,
+                expected: 32
+            })
+        );
+        let three = ViewImages::empty(vec![5, 6, 7], 32, false);
+        assert!(matches!(
+            inpainter.inpaint(&[car_views(32), three]),
+            Err(InpaintError::Views { object: 1, .. })
+        ));
+    }
+}

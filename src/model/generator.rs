@@ -1,0 +1,216 @@
+//! The inpainting generator: a per-view encoder with dilated residual blocks, a fusion
+//! convolution over all views' bottleneck features, and a per-view decoder that sees its own
+//! features beside the fused ones. Encoder and decoder weights are shared by the views.
+
+use super::layers::{ConvNorm, ConvSpec, LayerKind, Probe, ResBlock, UpNorm};
+use super::{ModelConfig, Padding};
+use burn::module::Module;
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+#[derive(Module, Debug)]
+pub struct Generator {
+    stem: ConvNorm,
+    down: Vec<ConvNorm>,
+    middle: Vec<ResBlock>,
+    fusion: ConvNorm,
+    up: Vec<UpNorm>,
+    head: ConvNorm,
+    views: usize,
+    channels: usize,
+}
+
+/// What the generator returns for a batch of objects.
+#[derive(Debug, Clone)]
+pub struct GeneratorOutput {
+    /// `[batch, views, channels, S, S]` in [0, 1]: geometry (and colour) for every pixel.
+    pub images: Tensor<5>,
+    /// `[batch, views, 1, S, S]`: logit of the pixel being part of the completed object.
+    pub occupancy: Tensor<5>,
+}
+
+impl Generator {
+    pub(super) fn new(config: &ModelConfig, device: &Device) -> Generator {
+        let w = config.width;
+        let padding = config.padding;
+        let conv = |channels, kernel, stride, pad, kind| ConvSpec {
+            channels,
+            kernel,
+            stride,
+            dilation: 1,
+            pad,
+            norm: true,
+            kind,
+        };
+        let stem = ConvNorm::new(
+            conv([config.input_channels(), w], 7, 1, 3, LayerKind::Conv7x7),
+            padding,
+            device,
+        );
+        let down = vec![
+            ConvNorm::new(
+                conv([w, 2 * w], 4, 2, 1, LayerKind::ConvDown),
+                padding,
+                device,
+            ),
+            ConvNorm::new(
+                conv([2 * w, 4 * w], 4, 2, 1, LayerKind::ConvDown),
+                padding,
+                device,
+            ),
+        ];
+        let middle = (0..config.res_blocks)
+            .map(|_| ResBlock::new(4 * w, padding, device))
+            .collect();
+        // The original's fusion convolution zero-pads; the config's padding mode is kept for
+        // all same-size convolutions alike so `Padding::Zero` removes every reflection.
+        let fusion = ConvNorm::new(
+            conv([config.views * 4 * w, 4 * w], 3, 1, 1, LayerKind::Fusion),
+            Padding::Zero,
+            device,
+        );
+        let up = vec![
+            UpNorm::new([8 * w, 2 * w], device),
+            UpNorm::new([2 * w, w], device),
+        ];
+        let head = ConvNorm::new(
+            ConvSpec {
+                norm: false,
+                ..conv(
+                    [w, config.channels.count() + 1],
+                    7,
+                    1,
+                    3,
+                    LayerKind::Conv7x7,
+                )
+            },
+            padding,
+            device,
+        );
+        Generator {
+            stem,
+            down,
+            middle,
+            fusion,
+            up,
+            head,
+            views: config.views,
+            channels: config.channels.count(),
+        }
+    }
+
+    /// # Shapes
+    /// `input`: `[batch, views, channels + 1, S, S]` (the last plane is the input's occupancy).
+    pub fn forward(&self, input: Tensor<5>) -> GeneratorOutput {
+        self.forward_probed(input, &mut super::NoProbe)
+    }
+
+    /// [`Self::forward`] with every layer run through `probe`.
+    pub fn forward_probed<P: Probe>(&self, input: Tensor<5>, probe: &mut P) -> GeneratorOutput {
+        let [batch, views, planes, size, _] = input.dims();
+        assert_eq!(
+            views, self.views,
+            "the generator was built for {} views",
+            self.views
+        );
+        assert_eq!(planes, self.channels + 1, "input planes");
+        let x = input.reshape([batch * views, planes, size, size]); // [B·V, C+1, S, S]
+
+        let mut x = self.stem.forward(x, probe);
+        x = probe.layer(LayerKind::Elementwise, || relu(x));
+        for down in &self.down {
+            x = down.forward(x, probe);
+            x = probe.layer(LayerKind::Elementwise, || relu(x));
+        }
+        for block in &self.middle {
+            x = block.forward(x, probe);
+        }
+        let [_, feat, fh, fw] = x.dims(); // [B·V, 4w, S/4, S/4]
+
+        let all = x.clone().reshape([batch, views * feat, fh, fw]); // [B, V·4w, S/4, S/4]
+        let fused = self.fusion.forward(all, probe);
+        let fused = probe.layer(LayerKind::Elementwise, || {
+            relu(fused)
+                .unsqueeze_dim::<5>(1)
+                .expand([batch, views, feat, fh, fw])
+                .reshape([batch * views, feat, fh, fw])
+        }); // [B·V, 4w, S/4, S/4]
+        let mut x = probe.layer(LayerKind::Elementwise, || Tensor::cat(vec![x, fused], 1)); // [B·V, 8w, S/4, S/4]
+
+        for up in &self.up {
+            x = up.forward(x, probe);
+            x = probe.layer(LayerKind::Elementwise, || relu(x));
+        }
+        let x = self.head.forward(x, probe); // [B·V, C+1, S, S]
+        let c = self.channels;
+        let x = probe.layer(LayerKind::Elementwise, || {
+            let images = x
+                .clone()
+                .narrow(1, 0, c)
+                .tanh()
+                .add_scalar(1.0)
+                .div_scalar(2.0);
+            Tensor::cat(vec![images, x.narrow(1, c, 1)], 1)
+        });
+        let x = x.reshape([batch, views, c + 1, size, size]); // [B, V, C+1, S, S]
+        GeneratorOutput {
+            images: x.clone().narrow(2, 0, c),
+            occupancy: x.narrow(2, c, 1),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Channels, Preset};
+    use burn::tensor::Distribution;
+
+    #[test]
+    fn output_shapes_ranges_and_finiteness() {
+        let device = Device::flex();
+        for channels in [Channels::Xyz, Channels::Xyzrgb] {
+            let config = Preset::Tiny.config().with_channels(channels).with_views(3);
+            let g = config.init_generator(&device).unwrap();
+            let c = channels.count();
+            let x = Tensor::<5>::random([2, 3, c + 1, 32, 32], Distribution::Default, &device);
+            let out = g.forward(x);
+            assert_eq!(out.images.dims(), [2, 3, c, 32, 32]);
+            assert_eq!(out.occupancy.dims(), [2, 3, 1, 32, 32]);
+            let images = out.images.into_data().try_into_vec::<f32>().unwrap();
+            assert!(images.iter().all(|v| (0.0..=1.0).contains(v)));
+            let logits = out.occupancy.into_data().try_into_vec::<f32>().unwrap();
+            assert!(logits.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    #[test]
+    fn views_are_fused_and_objects_are_not() {
+        // Changing view 0 of object 0 must change the other views of object 0 (through the
+        // fusion convolution) and leave object 1 alone.
+        let device = Device::flex();
+        let g = Preset::Tiny.config().init_generator(&device).unwrap();
+        let shape = [2, 4, 7, 32, 32];
+        let x = Tensor::<5>::random(shape, Distribution::Default, &device);
+        let bump = Tensor::<5>::zeros(shape, &device).slice_assign(
+            [0..1, 0..1, 0..7, 0..32, 0..32],
+            // Not a constant: instance norm would cancel a uniform shift.
+            Tensor::random([1, 1, 7, 32, 32], Distribution::Default, &device),
+        );
+        let a = g.forward(x.clone()).images;
+        let b = g.forward(x + bump).images;
+        let diff = |o: usize, v: usize| {
+            let range = [o..o + 1, v..v + 1, 0..6, 0..32, 0..32];
+            (a.clone().slice(range.clone()) - b.clone().slice(range))
+                .abs()
+                .max()
+                .into_scalar::<f32>()
+        };
+        assert!(
+            diff(0, 2) > 1e-6,
+            "other views of the object see the change"
+        );
+        assert_eq!(diff(1, 0), 0.0, "another object does not");
+        assert_eq!(diff(1, 3), 0.0);
+    }
+}

@@ -1,0 +1,310 @@
+//! The training losses. Each returns a one-element tensor (a mean) so terms can be weighted
+//! and summed; [`generator_losses`] assembles the generator's objective the way the original
+//! does.
+
+use super::{Discriminator, GeneratorOutput};
+use burn::config::Config;
+use burn::tensor::activation::relu;
+use burn::tensor::Tensor;
+use clap::ValueEnum;
+use serde::{Deserialize, Serialize};
+
+/// Weights of the generator's loss terms. The defaults are the original code's
+/// (`config.yml`); the paper's text swaps the style and perceptual weights.
+#[derive(Config, Debug, PartialEq)]
+pub struct LossWeights {
+    #[config(default = 50.0)]
+    pub l1: f64,
+    #[config(default = 0.1)]
+    pub adversarial: f64,
+    #[config(default = 250.0)]
+    pub style: f64,
+    #[config(default = 0.1)]
+    pub perceptual: f64,
+    /// BCE between the predicted and the true occupancy.
+    #[config(default = 0.1)]
+    pub occupancy: f64,
+    /// Total variation of the geometry planes, further divided by the image side `S`.
+    #[config(default = 0.1)]
+    pub tv: f64,
+    #[config(default = "Adversarial::Hinge")]
+    pub adversarial_kind: Adversarial,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Adversarial {
+    /// Hinge loss (SNGAN), the original's choice.
+    Hinge,
+    /// The non-saturating cross-entropy GAN loss.
+    NonSaturating,
+}
+
+/// Mean Huber loss with β = 1 (PyTorch's `SmoothL1Loss`), written as `q·(d − q/2)` with
+/// `q = min(d, 1)` so it needs no branch.
+pub fn smooth_l1<const D: usize>(pred: Tensor<D>, target: Tensor<D>) -> Tensor<1> {
+    let d = (pred - target).abs();
+    let q = d.clone().clamp_max(1.0);
+    (q.clone() * (d - q.div_scalar(2.0))).mean()
+}
+
+/// Mean binary cross-entropy of `logits` against targets in [0, 1], in the overflow-free form
+/// `max(x, 0) − x·t + log(1 + e^{−|x|})`.
+pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, target: Tensor<D>) -> Tensor<1> {
+    let softplus_tail = logits.clone().abs().neg().exp().log1p();
+    (logits.clone().clamp_min(0.0) - logits * target + softplus_tail).mean()
+}
+
+/// The discriminator's loss on its logits for real and generated patches (averaged, as the
+/// original halves the sum).
+pub fn discriminator_loss(kind: Adversarial, real: Tensor<4>, fake: Tensor<4>) -> Tensor<1> {
+    let sum = match kind {
+        Adversarial::Hinge => {
+            relu(real.neg().add_scalar(1.0)).mean() + relu(fake.add_scalar(1.0)).mean()
+        }
+        Adversarial::NonSaturating => {
+            let ones = real.ones_like();
+            let zeros = fake.zeros_like();
+            bce_with_logits(real, ones) + bce_with_logits(fake, zeros)
+        }
+    };
+    sum.div_scalar(2.0)
+}
+
+/// The generator's adversarial loss on the discriminator's logits for its output.
+pub fn generator_adversarial(kind: Adversarial, fake: Tensor<4>) -> Tensor<1> {
+    match kind {
+        Adversarial::Hinge => fake.mean().neg(),
+        Adversarial::NonSaturating => {
+            let ones = fake.ones_like();
+            bce_with_logits(fake, ones)
+        }
+    }
+}
+
+/// Sum over layers of the mean absolute feature difference.
+pub fn perceptual(fake: &[Tensor<4>], real: &[Tensor<4>]) -> Tensor<1> {
+    sum_over_layers(fake, real, |f, r| (f - r).abs().mean())
+}
+
+/// Gram matrix of each sample's features, normalized by their number.
+///
+/// # Shapes
+/// `[n, c, h, w]` → `[n, c, c]`
+pub fn gram(features: Tensor<4>) -> Tensor<3> {
+    let [n, c, h, w] = features.dims();
+    let f = features.reshape([n, c, h * w]);
+    f.clone()
+        .matmul(f.swap_dims(1, 2))
+        .div_scalar((c * h * w) as f64)
+}
+
+/// Sum over layers of the mean absolute difference of Gram matrices.
+pub fn style(fake: &[Tensor<4>], real: &[Tensor<4>]) -> Tensor<1> {
+    sum_over_layers(fake, real, |f, r| (gram(f) - gram(r)).abs().mean())
+}
+
+fn sum_over_layers(
+    fake: &[Tensor<4>],
+    real: &[Tensor<4>],
+    term: impl Fn(Tensor<4>, Tensor<4>) -> Tensor<1>,
+) -> Tensor<1> {
+    assert_eq!(fake.len(), real.len(), "one real feature map per fake one");
+    fake.iter()
+        .zip(real)
+        .map(|(f, r)| term(f.clone(), r.clone()))
+        .reduce(|a, b| a + b)
+        .expect("at least one feature layer")
+}
+
+/// Anisotropic total variation: per image plane, the summed absolute differences of
+/// neighbouring pixels, averaged over planes.
+pub fn total_variation(x: Tensor<4>) -> Tensor<1> {
+    let [n, c, h, w] = x.dims();
+    let dy = (x.clone().narrow(2, 1, h - 1) - x.clone().narrow(2, 0, h - 1))
+        .abs()
+        .sum();
+    let dx = (x.clone().narrow(3, 1, w - 1) - x.narrow(3, 0, w - 1))
+        .abs()
+        .sum();
+    (dy + dx).div_scalar((n * c) as f64)
+}
+
+/// What the discriminator judges: the images masked by the occupancy probability, with that
+/// probability as an extra plane, so empty pixels look alike in real and generated views.
+///
+/// # Shapes
+/// `images`: `[B, V, C, S, S]`, `occupancy`: `[B, V, 1, S, S]` probabilities →
+/// `[B·V, C+1, S, S]`
+pub fn discriminator_input(images: Tensor<5>, occupancy: Tensor<5>) -> Tensor<4> {
+    let [b, v, c, s, _] = images.dims();
+    Tensor::cat(vec![images * occupancy.clone(), occupancy], 2).reshape([b * v, c + 1, s, s])
+}
+
+/// One training sample's ground truth.
+#[derive(Debug, Clone)]
+pub struct Target {
+    /// `[B, V, C, S, S]` in [0, 1], zero where empty.
+    pub images: Tensor<5>,
+    /// `[B, V, 1, S, S]`, 1 where occupied.
+    pub occupancy: Tensor<5>,
+}
+
+/// The generator's loss terms, unweighted, and their weighted sum.
+pub struct GeneratorLosses {
+    pub l1: Tensor<1>,
+    pub adversarial: Tensor<1>,
+    pub perceptual: Tensor<1>,
+    pub style: Tensor<1>,
+    pub occupancy: Tensor<1>,
+    pub tv: Tensor<1>,
+    pub total: Tensor<1>,
+}
+
+/// The generator's objective for one batch. The smooth L1 term covers every output plane and
+/// is divided by the foreground fraction as the original does, so sparse objects weigh the
+/// same as dense ones.
+pub fn generator_losses(
+    output: &GeneratorOutput,
+    target: &Target,
+    discriminator: &Discriminator,
+    weights: &LossWeights,
+) -> GeneratorLosses {
+    let [_, _, c, s, _] = output.images.dims();
+    let foreground = target.occupancy.clone().mean().clamp_min(1e-3).detach();
+    let l1 = smooth_l1(output.images.clone(), target.images.clone()) / foreground;
+    let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
+
+    let fake = discriminator.forward(discriminator_input(
+        output.images.clone(),
+        burn::tensor::activation::sigmoid(output.occupancy.clone()),
+    ));
+    let real = discriminator
+        .forward(discriminator_input(target.images.clone(), target.occupancy.clone()).detach());
+    let real_features: Vec<Tensor<4>> = real.features.into_iter().map(|f| f.detach()).collect();
+    let adversarial = generator_adversarial(weights.adversarial_kind, fake.logits);
+    let perceptual = perceptual(&fake.features, &real_features);
+    let style = style(&fake.features, &real_features);
+
+    let [b, v, ..] = output.images.dims();
+    let geometry = output
+        .images
+        .clone()
+        .narrow(2, 0, 3)
+        .reshape([b * v, 3, s, s]);
+    debug_assert!(c >= 3);
+    let tv = total_variation(geometry);
+
+    let total = l1.clone().mul_scalar(weights.l1)
+        + adversarial.clone().mul_scalar(weights.adversarial)
+        + perceptual.clone().mul_scalar(weights.perceptual)
+        + style.clone().mul_scalar(weights.style)
+        + occupancy.clone().mul_scalar(weights.occupancy)
+        + tv.clone().mul_scalar(weights.tv / s as f64);
+    GeneratorLosses {
+        l1,
+        adversarial,
+        perceptual,
+        style,
+        occupancy,
+        tv,
+        total,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::{Device, TensorData};
+    use std::f64::consts::LN_2;
+    use std::slice;
+
+    fn t1(values: &[f32]) -> Tensor<1> {
+        Tensor::from_data(
+            TensorData::new(values.to_vec(), [values.len()]),
+            &Device::flex(),
+        )
+    }
+
+    fn t4(values: &[f32], shape: [usize; 4]) -> Tensor<4> {
+        Tensor::from_data(TensorData::new(values.to_vec(), shape), &Device::flex())
+    }
+
+    fn scalar(t: Tensor<1>) -> f64 {
+        t.into_data().try_into_vec::<f32>().unwrap()[0] as f64
+    }
+
+    fn close(a: f64, b: f64) {
+        assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+    }
+
+    #[test]
+    fn smooth_l1_is_quadratic_below_one_and_linear_above() {
+        // |d| = 0.5 → 0.125; |d| = 3 → 2.5; mean 1.3125.
+        close(scalar(smooth_l1(t1(&[0.5, -3.0]), t1(&[0.0, 0.0]))), 1.3125);
+    }
+
+    #[test]
+    fn bce_matches_the_textbook_formula_and_survives_large_logits() {
+        let x = [-2.0f32, 0.0, 3.0, 80.0, -80.0];
+        let t = [0.0f32, 1.0, 1.0, 0.0, 0.0];
+        // t·softplus(−x) + (1 − t)·softplus(x), term by term.
+        let expected = (0.126_928_011 + LN_2 + 0.048_587_352 + 80.0 + 0.0) / 5.0;
+        let got = scalar(bce_with_logits(t1(&x), t1(&t)));
+        assert!(
+            (got - expected).abs() / expected < 1e-5,
+            "{got} vs {expected}"
+        );
+    }
+
+    #[test]
+    fn hinge_losses() {
+        let real = t4(&[2.0, 0.5], [1, 1, 1, 2]); // relu(1 − x): 0, 0.5 → mean 0.25
+        let fake = t4(&[-2.0, 0.0], [1, 1, 1, 2]); // relu(1 + x): 0, 1 → mean 0.5
+        close(
+            scalar(discriminator_loss(Adversarial::Hinge, real, fake.clone())),
+            0.375,
+        );
+        close(scalar(generator_adversarial(Adversarial::Hinge, fake)), 1.0);
+    }
+
+    #[test]
+    fn non_saturating_losses() {
+        let zero = t4(&[0.0], [1, 1, 1, 1]);
+        close(
+            scalar(discriminator_loss(
+                Adversarial::NonSaturating,
+                zero.clone(),
+                zero.clone(),
+            )),
+            LN_2,
+        );
+        close(
+            scalar(generator_adversarial(Adversarial::NonSaturating, zero)),
+            LN_2,
+        );
+    }
+
+    #[test]
+    fn gram_and_style() {
+        // One sample, two channels of two pixels: F = [[1, 2], [3, 4]], F·Fᵀ / 4.
+        let f = t4(&[1.0, 2.0, 3.0, 4.0], [1, 2, 1, 2]);
+        let g = gram(f.clone()).into_data().try_into_vec::<f32>().unwrap();
+        assert_eq!(g, vec![1.25, 2.75, 2.75, 6.25]);
+        close(scalar(style(slice::from_ref(&f), slice::from_ref(&f))), 0.0);
+        let zero = f.zeros_like();
+        close(
+            scalar(style(slice::from_ref(&f), slice::from_ref(&zero))),
+            13.0 / 4.0,
+        );
+        close(scalar(perceptual(&[f], &[zero])), 2.5);
+    }
+
+    #[test]
+    fn total_variation_counts_neighbour_steps() {
+        // 2×3 plane: rows [0 1 3], [0 0 0]: horizontal |1|+|2| = 3, vertical 1+3 = 4.
+        let x = t4(&[0.0, 1.0, 3.0, 0.0, 0.0, 0.0], [1, 1, 2, 3]);
+        close(scalar(total_variation(x)), 7.0);
+        close(scalar(total_variation(t4(&[5.0; 6], [1, 1, 2, 3]))), 0.0);
+    }
+}

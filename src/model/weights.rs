@@ -1,0 +1,294 @@
+//! Weights files: one safetensors file per network, its config and a format version in the
+//! header's `__metadata__`, so a file is self-describing and any safetensors reader can open
+//! it. Loading works from bytes, which is how the default model is embedded in the binary.
+
+use super::{ConfigError, Discriminator, Generator, ModelConfig};
+use burn::module::Module;
+use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::tensor::Device;
+use std::collections::BTreeMap;
+use thiserror::Error;
+
+/// Bumped whenever a change to the networks' structure makes older files unreadable.
+pub const FORMAT_VERSION: u32 = 1;
+
+const KEY_KIND: &str = "mvpcc.network";
+const KEY_VERSION: &str = "mvpcc.format_version";
+const KEY_CONFIG: &str = "mvpcc.model_config";
+
+/// Which network a weights file holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Network {
+    Generator,
+    Discriminator,
+}
+
+impl Network {
+    fn name(self) -> &'static str {
+        match self {
+            Network::Generator => "generator",
+            Network::Discriminator => "discriminator",
+        }
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum WeightsError {
+    #[error("not a safetensors file ({0})")]
+    NotSafetensors(&'static str),
+    #[error("not an mvpcc weights file (no {KEY_KIND} in the safetensors metadata)")]
+    NotMvpcc,
+    #[error("holds a {found}, not a {expected}")]
+    WrongNetwork {
+        expected: &'static str,
+        found: String,
+    },
+    #[error("format version {found}, this mvpcc reads version {FORMAT_VERSION}")]
+    Version { found: String },
+    #[error("its model config is unreadable: {0}")]
+    Config(String),
+    #[error("its model config is invalid: {0}")]
+    InvalidConfig(#[from] ConfigError),
+    #[error("expected model config {expected}, the file has {found}")]
+    ConfigMismatch { expected: String, found: String },
+    #[error("its tensors do not fit the config it declares: {0}")]
+    Tensors(String),
+    #[error("could not serialize the weights: {0}")]
+    Save(String),
+}
+
+/// The `__metadata__` map of a safetensors file, read without touching the tensors.
+fn metadata(bytes: &[u8]) -> Result<BTreeMap<String, String>, WeightsError> {
+    let len: [u8; 8] = bytes
+        .get(..8)
+        .and_then(|b| b.try_into().ok())
+        .ok_or(WeightsError::NotSafetensors("shorter than its header"))?;
+    let len = u64::from_le_bytes(len);
+    let header = usize::try_from(len)
+        .ok()
+        .and_then(|len| bytes.get(8..8usize.checked_add(len)?))
+        .ok_or(WeightsError::NotSafetensors("header length past the end"))?;
+    #[derive(serde::Deserialize)]
+    struct Header {
+        #[serde(rename = "__metadata__", default)]
+        metadata: BTreeMap<String, String>,
+    }
+    let header: Header = serde_json::from_slice(header)
+        .map_err(|_| WeightsError::NotSafetensors("header is not JSON"))?;
+    Ok(header.metadata)
+}
+
+/// The config a weights file declares, after checking that it holds `network` in a format
+/// this build reads.
+pub fn read_config(bytes: &[u8], network: Network) -> Result<ModelConfig, WeightsError> {
+    let meta = metadata(bytes)?;
+    let kind = meta.get(KEY_KIND).ok_or(WeightsError::NotMvpcc)?;
+    if kind != network.name() {
+        return Err(WeightsError::WrongNetwork {
+            expected: network.name(),
+            found: kind.clone(),
+        });
+    }
+    let version = meta.get(KEY_VERSION).cloned().unwrap_or_default();
+    if version != FORMAT_VERSION.to_string() {
+        return Err(WeightsError::Version { found: version });
+    }
+    let config: ModelConfig = serde_json::from_str(
+        meta.get(KEY_CONFIG)
+            .ok_or_else(|| WeightsError::Config(format!("no {KEY_CONFIG} in the metadata")))?,
+    )
+    .map_err(|e| WeightsError::Config(e.to_string()))?;
+    config.validate()?;
+    Ok(config)
+}
+
+fn to_bytes<M: Module>(
+    module: &M,
+    network: Network,
+    config: &ModelConfig,
+) -> Result<Vec<u8>, WeightsError> {
+    let config = serde_json::to_string(config).map_err(|e| WeightsError::Save(e.to_string()))?;
+    let mut store = SafetensorsStore::from_bytes(None)
+        .metadata(KEY_KIND, network.name())
+        .metadata(KEY_VERSION, FORMAT_VERSION.to_string())
+        .metadata(KEY_CONFIG, config);
+    module
+        .save_into(&mut store)
+        .map_err(|e| WeightsError::Save(e.to_string()))?;
+    store
+        .get_bytes()
+        .map_err(|e| WeightsError::Save(e.to_string()))
+}
+
+fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
+    let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()));
+    let result = module
+        .load_from(&mut store)
+        .map_err(|e| WeightsError::Tensors(one_line(&e.to_string())))?;
+    if let Some(unused) = result.unused.first() {
+        return Err(WeightsError::Tensors(format!(
+            "{} tensors the network does not have, e.g. {unused}",
+            result.unused.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Burn's store errors run over several lines with hints; an error message here is one line.
+fn one_line(message: &str) -> String {
+    message
+        .split('\n')
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .take(3)
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+pub fn generator_to_bytes(
+    generator: &Generator,
+    config: &ModelConfig,
+) -> Result<Vec<u8>, WeightsError> {
+    to_bytes(generator, Network::Generator, config)
+}
+
+/// A generator and the config it was built from.
+pub fn generator_from_bytes(
+    bytes: &[u8],
+    device: &Device,
+) -> Result<(Generator, ModelConfig), WeightsError> {
+    let config = read_config(bytes, Network::Generator)?;
+    let mut generator = config.init_generator(device)?;
+    apply(&mut generator, bytes)?;
+    Ok((generator, config))
+}
+
+pub fn discriminator_to_bytes(
+    discriminator: &Discriminator,
+    config: &ModelConfig,
+) -> Result<Vec<u8>, WeightsError> {
+    to_bytes(discriminator, Network::Discriminator, config)
+}
+
+/// A discriminator whose file must declare `expected` (the generator's config it trains with).
+pub fn discriminator_from_bytes(
+    bytes: &[u8],
+    expected: &ModelConfig,
+    device: &Device,
+) -> Result<Discriminator, WeightsError> {
+    let config = read_config(bytes, Network::Discriminator)?;
+    if &config != expected {
+        return Err(WeightsError::ConfigMismatch {
+            expected: serde_json::to_string(expected).unwrap_or_default(),
+            found: serde_json::to_string(&config).unwrap_or_default(),
+        });
+    }
+    let mut discriminator = config.init_discriminator(device)?;
+    apply(&mut discriminator, bytes)?;
+    Ok(discriminator)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Channels, Preset};
+    use burn::tensor::{Distribution, Tensor};
+
+    #[test]
+    fn generator_save_load_gives_identical_outputs() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        let bytes = generator_to_bytes(&g, &config).unwrap();
+        let (back, back_config) = generator_from_bytes(&bytes, &device).unwrap();
+        assert_eq!(back_config, config);
+        let x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
+        let a = g.forward(x.clone());
+        let b = back.forward(x);
+        assert_eq!(a.images.into_data(), b.images.into_data());
+        assert_eq!(a.occupancy.into_data(), b.occupancy.into_data());
+        // A fresh generator is different, so the equality above is not vacuous.
+        let other = config.init_generator(&device).unwrap();
+        let bytes_other = generator_to_bytes(&other, &config).unwrap();
+        assert_ne!(bytes, bytes_other);
+    }
+
+    #[test]
+    fn discriminator_round_trip_keeps_the_power_iteration_state() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let d = config.init_discriminator(&device).unwrap();
+        let bytes = discriminator_to_bytes(&d, &config).unwrap();
+        let back = discriminator_from_bytes(&bytes, &config, &device).unwrap();
+        let x = Tensor::<4>::random([2, 7, 32, 32], Distribution::Default, &device);
+        assert_eq!(
+            d.forward(x.clone()).logits.into_data(),
+            back.forward(x).logits.into_data()
+        );
+        let other = config.clone().with_disc_width(16);
+        assert!(matches!(
+            discriminator_from_bytes(&bytes, &other, &device),
+            Err(WeightsError::ConfigMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn mismatches_and_garbage_are_errors_not_panics() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        let good = generator_to_bytes(&g, &config).unwrap();
+
+        let err = |bytes: &[u8]| generator_from_bytes(bytes, &device).unwrap_err();
+        assert!(matches!(err(b""), WeightsError::NotSafetensors(_)));
+        assert!(matches!(
+            err(b"\xff\xff\xff\xff\xff\xff\xff\x7f{}"),
+            WeightsError::NotSafetensors(_)
+        ));
+        assert!(matches!(
+            err(&good[..good.len() / 2]),
+            WeightsError::Tensors(_)
+        ));
+
+        let d = config.init_discriminator(&device).unwrap();
+        let disc = discriminator_to_bytes(&d, &config).unwrap();
+        assert!(matches!(err(&disc), WeightsError::WrongNetwork { .. }));
+
+        // Same tensor names, other shapes: the declared config is tampered with.
+        let wider = serde_json::to_string(&config.clone().with_width(16)).unwrap();
+        let narrow = serde_json::to_string(&config).unwrap();
+        let tampered = replace_in_header(&good, &narrow, &wider);
+        assert!(matches!(err(&tampered), WeightsError::Tensors(_)));
+        let xyz = serde_json::to_string(&config.clone().with_channels(Channels::Xyz)).unwrap();
+        assert!(matches!(
+            err(&replace_in_header(&good, &narrow, &xyz)),
+            WeightsError::Tensors(_)
+        ));
+        let version = replace_in_header(
+            &good,
+            &format!("\"{KEY_VERSION}\":\"{FORMAT_VERSION}\""),
+            &format!("\"{KEY_VERSION}\":\"99\""),
+        );
+        assert!(matches!(err(&version), WeightsError::Version { .. }));
+    }
+
+    /// Rewrites a string inside the JSON header, fixing the header length.
+    fn replace_in_header(bytes: &[u8], from: &str, to: &str) -> Vec<u8> {
+        let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        let header = std::str::from_utf8(&bytes[8..8 + len]).unwrap();
+        let escaped = |s: &str| serde_json::to_string(s).unwrap();
+        let (from_json, to_json) = if from.starts_with('"') {
+            (from.to_string(), to.to_string())
+        } else {
+            let f = escaped(from);
+            let t = escaped(to);
+            (f[1..f.len() - 1].to_string(), t[1..t.len() - 1].to_string())
+        };
+        assert!(header.contains(&from_json), "{from_json} not in {header}");
+        let new_header = header.replace(&from_json, &to_json);
+        let mut out = (new_header.len() as u64).to_le_bytes().to_vec();
+        out.extend_from_slice(new_header.as_bytes());
+        out.extend_from_slice(&bytes[8 + len..]);
+        out
+    }
+}

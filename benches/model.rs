@@ -3,6 +3,7 @@
 
 use burn::tensor::{Device, Distribution, Tensor};
 use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::model::weights::{generator_from_bytes, generator_to_bytes};
 use mvpcc::model::Preset;
 use std::time::Duration;
 
@@ -33,5 +34,20 @@ fn generator_forward(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, generator_forward);
+/// What `complete` pays before its first forward: parsing an embedded weights file.
+fn load_weights(c: &mut Criterion) {
+    let device = Device::flex();
+    let config = Preset::Cpu.config();
+    let generator = config.init_generator(&device).unwrap();
+    let bytes = generator_to_bytes(&generator, &config).unwrap();
+    c.bench_function(
+        &format!(
+            "load cpu generator weights ({} MB)",
+            bytes.len() / 1_000_000
+        ),
+        |b| b.iter(|| generator_from_bytes(&bytes, &device).unwrap()),
+    );
+}
+
+criterion_group!(benches, generator_forward, load_weights);
 criterion_main!(benches);

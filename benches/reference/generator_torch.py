@@ -15,7 +15,7 @@ from torch import nn
 PRESETS = {
     "paper": dict(width=64, res_blocks=8, size=256, padding="reflect"),
     "small": dict(width=32, res_blocks=4, size=128, padding="reflect"),
-    "cpu": dict(width=32, res_blocks=4, size=128, padding="zero"),
+    "cpu": dict(width=56, res_blocks=6, size=128, padding="zero"),
 }
 
 
@@ -68,6 +68,7 @@ def main():
     ap.add_argument("--config", choices=PRESETS, default="small")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--profile", action="store_true", help="also print torch.profiler's op table")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     p = PRESETS[args.config]
@@ -82,6 +83,10 @@ def main():
             times.append((time.perf_counter() - t) * 1e3)
     print(f"{args.config}: median {statistics.median(times):.1f} ms over {args.runs} runs "
           f"({', '.join(f'{t:.0f}' for t in times)}), torch {torch.__version__}, {args.threads} threads")
+    if args.profile:
+        with torch.no_grad(), torch.profiler.profile() as prof:
+            g(x)
+        print(prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=12))
     print(f"forward_ms_median={statistics.median(times):.1f}")
 
 

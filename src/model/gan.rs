@@ -197,17 +197,17 @@ mod tests {
         (gan, history)
     }
 
+    /// Asserts that a loss read by `pick` fell below `factor` × its first value.
+    fn falls(history: &[StepLosses], name: &str, factor: f32, pick: fn(&StepLosses) -> f32) {
+        let (first, last) = (pick(&history[0]), pick(&history[history.len() - 1]));
+        assert!(last < factor * first, "{name} {first} → {last}");
+    }
+
     #[test]
     fn generator_loss_falls_over_a_few_steps_on_one_sample() {
         let (gan, history) = train(LossWeights::new(), 12);
-        let (first, last) = (history[0], history[history.len() - 1]);
-        assert!(last.l1 < 0.5 * first.l1, "L1 {} → {}", first.l1, last.l1);
-        assert!(
-            last.generator < 0.5 * first.generator,
-            "total {} → {}",
-            first.generator,
-            last.generator
-        );
+        falls(&history, "L1", 0.5, |l| l.l1);
+        falls(&history, "total", 0.5, |l| l.generator);
         // The trained generator still runs without autodiff.
         let plain = gan.generator.valid();
         let x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &Device::flex());
@@ -225,13 +225,7 @@ mod tests {
             .with_perceptual(0.0)
             .with_adversarial(0.0);
         let (_, history) = train(weights, 12);
-        let (first, last) = (history[0], history[history.len() - 1]);
-        assert!(last.l1 < 0.5 * first.l1, "L1 {} → {}", first.l1, last.l1);
-        assert!(
-            last.occupancy < 0.8 * first.occupancy,
-            "BCE {} → {}",
-            first.occupancy,
-            last.occupancy
-        );
+        falls(&history, "L1", 0.5, |l| l.l1);
+        falls(&history, "BCE", 0.8, |l| l.occupancy);
     }
 }

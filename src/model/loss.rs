@@ -170,7 +170,7 @@ pub fn generator_losses(
     discriminator: &Discriminator,
     weights: &LossWeights,
 ) -> GeneratorLosses {
-    let [_, _, c, s, _] = output.images.dims();
+    let [b, v, _, s, _] = output.images.dims();
     let foreground = target.occupancy.clone().mean().clamp_min(1e-3).detach();
     let l1 = smooth_l1(output.images.clone(), target.images.clone()) / foreground;
     let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
@@ -186,13 +186,11 @@ pub fn generator_losses(
     let perceptual = perceptual(&fake.features, &real_features);
     let style = style(&fake.features, &real_features);
 
-    let [b, v, ..] = output.images.dims();
     let geometry = output
         .images
         .clone()
         .narrow(2, 0, 3)
         .reshape([b * v, 3, s, s]);
-    debug_assert!(c >= 3);
     let tv = total_variation(geometry);
 
     let total = l1.clone().mul_scalar(weights.l1)

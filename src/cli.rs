@@ -2,10 +2,14 @@
 //! here; what they do lives in [`crate::commands`].
 
 use crate::camera::{parse_view_set, DEFAULT_VIEWS};
+use crate::data::CloudPolicy;
 use crate::device::DeviceChoice;
 use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
+use crate::mesh::SignedAxis;
 use crate::model::{Channels, ModelConfig, Padding, Preset};
+use crate::scan::PartialKinds;
+use crate::synth::Category;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -36,6 +40,11 @@ pub enum Command {
     Filter(FilterArgs),
     /// Time the network's forward pass on random input, by layer kind.
     Profile(ProfileArgs),
+    /// Make training data from meshes: ground truth, partial scans and their view images in
+    /// the original dataset's layout.
+    Prepare(PrepareArgs),
+    /// Generate street-object meshes (cars, buses, trucks, trains, motorcycles) as OBJ + MTL.
+    Synth(SynthArgs),
 }
 
 /// How an input file is read.
@@ -257,4 +266,102 @@ impl ProfileArgs {
         c.padding = self.padding.unwrap_or(c.padding);
         c
     }
+}
+
+#[derive(Debug, Args)]
+pub struct PrepareArgs {
+    /// Directory of meshes (OBJ+MTL, PLY, glTF/GLB), as DIR/<category>/<name>.* or ShapeNet's
+    /// DIR/<synset>/<id>/models/model_normalized.obj.
+    #[arg(long, required_unless_present = "synth", conflicts_with = "synth")]
+    pub meshes: Option<PathBuf>,
+    /// Generate this many street objects into OUT/meshes first and prepare those.
+    #[arg(long)]
+    pub synth: Option<usize>,
+    #[command(flatten)]
+    pub synth_options: SynthOptions,
+    /// Output data directory (created if missing; an interrupted run resumes in it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Fraction of models in the train split; the rest is test.
+    #[arg(long, default_value_t = 0.93)]
+    pub split: f64,
+    /// Partial samples per model.
+    #[arg(long, default_value_t = 20)]
+    pub samples: usize,
+    /// Rig cameras of the training views.
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Training view side in pixels.
+    #[arg(long, default_value_t = 256)]
+    pub size: usize,
+    /// Render size of the 20 rig cameras the ground truth is sampled with.
+    #[arg(long, default_value_t = 512)]
+    pub gt_size: usize,
+    /// Ground-truth voxel (normalized units): one point is kept per voxel.
+    #[arg(long, default_value_t = 1.0 / 256.0)]
+    pub gt_voxel: f32,
+    /// Which partial scans to make.
+    #[arg(long, value_enum, default_value_t = PartialKinds::Both)]
+    pub partial: PartialKinds,
+    /// Fewest points a partial is aimed at (drawn log-uniformly up to --max-points).
+    #[arg(long, default_value_t = 2_000)]
+    pub min_points: usize,
+    #[arg(long, default_value_t = 130_000)]
+    pub max_points: usize,
+    /// Largest angle (degrees) between the simulated scanner's path and the object's axis.
+    #[arg(long, default_value_t = 10.0)]
+    pub yaw_error: f32,
+    /// Largest range-noise standard deviation of the scanner (normalized units).
+    #[arg(long, default_value_t = 0.002)]
+    pub noise: f32,
+    /// The meshes' up axis (x, y, z, -x, -y, -z).
+    #[arg(long, default_value = "y", allow_hyphen_values = true)]
+    pub up: SignedAxis,
+    /// The axis the meshes' fronts point along (ShapeNet: -z).
+    #[arg(long, default_value = "-z", allow_hyphen_values = true)]
+    pub forward: SignedAxis,
+    /// Which partial clouds are written as PLY beside the views (gt.ply always is).
+    #[arg(long, value_enum, default_value_t = CloudPolicy::Test)]
+    pub clouds: CloudPolicy,
+    /// Use the material colour where an MTL file or a texture is missing, instead of skipping
+    /// the mesh.
+    #[arg(long)]
+    pub allow_missing_materials: bool,
+    /// Meshes with more triangles are skipped.
+    #[arg(long, default_value_t = 5_000_000)]
+    pub max_triangles: usize,
+    /// Print the run's summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Number of objects.
+    #[arg(long)]
+    pub count: usize,
+    /// Output directory; objects go to OUT/<category>/<category>_NNNNN.obj.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub synth_options: SynthOptions,
+    /// Also write OUT/preview.png: the first 16 objects rendered from one camera.
+    #[arg(long)]
+    pub preview: bool,
+}
+
+/// What `synth` draws from, shared with `prepare --synth`.
+#[derive(Debug, Args)]
+pub struct SynthOptions {
+    /// Categories to draw from (with --synth; cars weighted 4:1 against each other category).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "car,bus,truck,train,motorcycle"
+    )]
+    pub category: Vec<Category>,
+    /// Seed of everything random: objects, samples, noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }

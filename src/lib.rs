@@ -5,20 +5,27 @@
 //! [`views`] stores those images in the original dataset's PNG layout, [`reprojection`] and
 //! [`filter`] turn views back into a cloud, and [`metrics`] scores the result. [`model`] is the
 //! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
+//! Training data comes from meshes ([`mesh`], [`synth`]): [`raster`] renders them, [`scan`]
+//! samples ground truth and partial scans, and [`data`] writes the dataset.
 
 pub mod camera;
 pub mod cli;
 pub mod cloud;
 pub mod commands;
+pub mod data;
 pub mod device;
 pub mod filter;
 pub mod frame;
 pub mod inpaint;
 pub mod io;
 pub mod knn;
+pub mod mesh;
 pub mod metrics;
 pub mod model;
 pub mod projection;
+pub mod raster;
 pub mod reprojection;
+pub mod scan;
 pub mod shapes;
+pub mod synth;
 pub mod views;

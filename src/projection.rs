@@ -66,48 +66,56 @@ pub fn project(points: &[[f32; 3]], colors: Option<&[[u8; 3]]>, cameras: &[Camer
     if let Some(colors) = colors {
         assert_eq!(colors.len(), points.len(), "one colour per point");
     }
-    let mut images = ViewImages::empty(
-        cameras.iter().map(|c| c.index).collect(),
-        size,
-        colors.is_some(),
-    );
+    let plane = size * size;
+    render_each_view(cameras, colors.is_some(), |camera, pixels, occupancy| {
+        let projector = camera.projector();
+        let mut depth = vec![f32::INFINITY; plane];
+        let mut winner = vec![u32::MAX; plane];
+        for (i, &p) in points.iter().enumerate() {
+            if let Some((row, col, d)) = projector.project(p) {
+                let at = row * size + col;
+                // Strict: of equally near points the first one wins, deterministically.
+                if d < depth[at] {
+                    depth[at] = d;
+                    winner[at] = i as u32;
+                }
+            }
+        }
+        for (at, &w) in winner.iter().enumerate() {
+            if w == u32::MAX {
+                continue;
+            }
+            occupancy[at] = true;
+            let p = points[w as usize];
+            for c in 0..3 {
+                pixels[c * plane + at] = p[c];
+            }
+            if let Some(colors) = colors {
+                let rgb = colors[w as usize];
+                for c in 0..3 {
+                    pixels[(3 + c) * plane + at] = rgb[c] as f32 / 255.0;
+                }
+            }
+        }
+    })
+}
+
+/// Views of `cameras` (one image size), each filled in parallel by `fill(camera, pixels
+/// [6, S, S], occupancy [S, S])`.
+pub fn render_each_view(
+    cameras: &[Camera],
+    has_color: bool,
+    fill: impl Fn(&Camera, &mut [f32], &mut [bool]) + Sync,
+) -> ViewImages {
+    let size = cameras.first().map_or(0, |c| c.size);
+    let mut images = ViewImages::empty(cameras.iter().map(|c| c.index).collect(), size, has_color);
     let plane = size * size;
     images
         .pixels
         .par_chunks_mut(CHANNELS * plane)
         .zip(images.occupancy.par_chunks_mut(plane))
         .zip(cameras.par_iter())
-        .for_each(|((pixels, occupancy), camera)| {
-            let projector = camera.projector();
-            let mut depth = vec![f32::INFINITY; plane];
-            let mut winner = vec![u32::MAX; plane];
-            for (i, &p) in points.iter().enumerate() {
-                if let Some((row, col, d)) = projector.project(p) {
-                    let at = row * size + col;
-                    // Strict: of equally near points the first one wins, deterministically.
-                    if d < depth[at] {
-                        depth[at] = d;
-                        winner[at] = i as u32;
-                    }
-                }
-            }
-            for (at, &w) in winner.iter().enumerate() {
-                if w == u32::MAX {
-                    continue;
-                }
-                occupancy[at] = true;
-                let p = points[w as usize];
-                for c in 0..3 {
-                    pixels[c * plane + at] = p[c];
-                }
-                if let Some(colors) = colors {
-                    let rgb = colors[w as usize];
-                    for c in 0..3 {
-                        pixels[(3 + c) * plane + at] = rgb[c] as f32 / 255.0;
-                    }
-                }
-            }
-        });
+        .for_each(|((pixels, occupancy), camera)| fill(camera, pixels, occupancy));
     images
 }
 

@@ -484,3 +484,337 @@ fn profile_refuses_a_size_the_network_cannot_take() {
         none,
     );
 }
+
+/// Small, fast settings for `prepare` in debug builds.
+const SMALL: [&str; 12] = [
+    "--samples",
+    "2",
+    "--size",
+    "64",
+    "--gt-size",
+    "128",
+    "--views",
+    "5,6",
+    "--min-points",
+    "1000",
+    "--max-points",
+    "4000",
+];
+
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Every file under `dir`, relative, sorted.
+fn tree(dir: &Path) -> Vec<PathBuf> {
+    fn walk(root: &Path, dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(root, &p, out);
+            } else {
+                out.push(p.strip_prefix(root).unwrap().to_path_buf());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}
+
+#[test]
+fn synth_is_deterministic_and_writes_a_preview() {
+    let dir = TempDir::new().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    for out in [&a, &b] {
+        mvpcc()
+            .args(["synth", "--count", "7", "--seed", "3", "--preview", "--out"])
+            .arg(out)
+            .assert()
+            .success()
+            .stderr(predicate::str::contains("preview.png"));
+    }
+    let files = tree(&a);
+    assert_eq!(files, tree(&b));
+    let objs: Vec<&PathBuf> = files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "obj"))
+        .collect();
+    assert_eq!(objs.len(), 7);
+    for f in &files {
+        if f.extension()
+            .is_some_and(|e| e == "obj" || e == "mtl" || e == "json")
+        {
+            assert_eq!(
+                std::fs::read(a.join(f)).unwrap(),
+                std::fs::read(b.join(f)).unwrap(),
+                "{f:?}"
+            );
+        }
+    }
+    let preview = image::open(a.join("preview.png")).unwrap();
+    assert_eq!((preview.width(), preview.height()), (4 * 192, 2 * 192));
+    let other = dir.path().join("c");
+    mvpcc()
+        .args(["synth", "--count", "7", "--seed", "4", "--out"])
+        .arg(&other)
+        .assert()
+        .success();
+    let first = &objs[0];
+    assert_ne!(
+        std::fs::read(a.join(first)).ok(),
+        std::fs::read(other.join(first)).ok()
+    );
+    fails(
+        &["synth", "--count", "0", "--out", "x"],
+        "--count",
+        "at least 1",
+        Path::new("x"),
+    );
+}
+
+#[test]
+fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings() {
+    let dir = TempDir::new().unwrap();
+    let data = dir.path().join("data");
+    let run = |extra: &[&str]| {
+        mvpcc()
+            .args([
+                "prepare", "--synth", "3", "--split", "0.5", "--json", "--out",
+            ])
+            .arg(&data)
+            .args(SMALL)
+            .args(extra)
+            .assert()
+    };
+    let out = run(&[]).success().get_output().stdout.clone();
+    let summary: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    assert_eq!(summary["models"], 3);
+    assert_eq!(summary["samples"], 6);
+    let manifest = read_json(&data.join("manifest.json"));
+    let models = manifest["models"].as_array().unwrap();
+    assert_eq!(models.len(), 3);
+    assert_eq!(manifest["params"]["size"], 64);
+    for m in models {
+        let (split, cat, name) = (
+            m["split"].as_str().unwrap(),
+            m["category"].as_str().unwrap(),
+            m["name"].as_str().unwrap(),
+        );
+        let gt = data.join("GT").join(split).join(cat).join(name);
+        let views = mvpcc::views::read_views(&gt, None).unwrap();
+        assert_eq!((views.cameras.clone(), views.size), (vec![5, 6], 64));
+        assert!(views.occupied() > 500, "dense ground-truth views");
+        assert!(gt.join("color_006.png").exists());
+        for k in 1..=2 {
+            let partial = data
+                .join("in")
+                .join(split)
+                .join(cat)
+                .join(name)
+                .join(k.to_string());
+            let p = mvpcc::views::read_views(&partial, None).unwrap();
+            assert!(p.occupied() > 0 && p.occupied() <= 2 * 64 * 64);
+            assert_eq!(
+                data.join("clouds")
+                    .join(split)
+                    .join(cat)
+                    .join(name)
+                    .join(format!("partial_{k}.ply"))
+                    .exists(),
+                split == "test"
+            );
+        }
+        let gt_cloud = data
+            .join("clouds")
+            .join(split)
+            .join(cat)
+            .join(name)
+            .join("gt.ply");
+        let loaded = read_cloud(&gt_cloud, None).unwrap().cloud;
+        assert_eq!(loaded.len() as u64, m["gt_points"].as_u64().unwrap());
+        assert!(loaded.colors.is_some());
+        let b = loaded.bounds().unwrap();
+        assert!(b.min.iter().chain(&b.max).all(|c| c.abs() <= 0.5 + 1e-6));
+    }
+    // A second run finds everything done.
+    run(&[])
+        .success()
+        .stderr(predicate::str::contains("3 of 3 models already prepared"));
+    // A model without its done marker (an interrupted run) is made again, identically.
+    let m = &models[0];
+    let clouds = data
+        .join("clouds")
+        .join(m["split"].as_str().unwrap())
+        .join(m["category"].as_str().unwrap())
+        .join(m["name"].as_str().unwrap());
+    let before = std::fs::read(clouds.join("gt.ply")).unwrap();
+    std::fs::remove_file(clouds.join("done.json")).unwrap();
+    std::fs::write(clouds.join("gt.ply"), b"half").unwrap();
+    let out = run(&[]).success().get_output().stdout.clone();
+    let summary: serde_json::Value = serde_json::from_slice(&out).unwrap();
+    assert_eq!(
+        (summary["resumed"].clone(), summary["models"].clone()),
+        (2.into(), 3.into())
+    );
+    assert_eq!(std::fs::read(clouds.join("gt.ply")).unwrap(), before);
+    assert_eq!(
+        read_json(&data.join("manifest.json"))["models"],
+        manifest["models"]
+    );
+    // Mixing settings in one directory is refused.
+    let assert = run(&["--gt-voxel", "0.01"]).failure();
+    let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
+    let last = stderr.lines().last().unwrap();
+    assert!(
+        last.starts_with("error: ") && last.contains("gt_voxel"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn prepare_reads_a_shapenet_layout_and_skips_bad_meshes_with_a_count() {
+    let dir = TempDir::new().unwrap();
+    let synth = dir.path().join("synth");
+    mvpcc()
+        .args(["synth", "--count", "2", "--category", "car", "--out"])
+        .arg(&synth)
+        .assert()
+        .success();
+    // ShapeNetCore v2: <synset>/<id>/models/model_normalized.obj, textures in ../images.
+    let root = dir.path().join("02958343");
+    for (i, id) in ["1a2b", "3c4d"].iter().enumerate() {
+        let models = root.join(id).join("models");
+        std::fs::create_dir_all(&models).unwrap();
+        let obj = std::fs::read_to_string(synth.join(format!("car/car_{i:05}.obj"))).unwrap();
+        std::fs::write(
+            models.join("model_normalized.obj"),
+            obj.replace(&format!("car_{i:05}.mtl"), "model_normalized.mtl"),
+        )
+        .unwrap();
+        std::fs::copy(
+            synth.join(format!("car/car_{i:05}.mtl")),
+            models.join("model_normalized.mtl"),
+        )
+        .unwrap();
+    }
+    let bad = root.join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    std::fs::write(bad.join("nofaces.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+    std::fs::write(
+        bad.join("nan.obj"),
+        "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        bad.join("garbage.ply"),
+        "ply\nformat ascii 1.0\nelement vertex x\n",
+    )
+    .unwrap();
+    std::fs::write(
+        bad.join("notexture.obj"),
+        "mtllib notexture.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl t\nf 1/1 2/2 3/3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        bad.join("notexture.mtl"),
+        "newmtl t\nmap_Kd ../images/gone.jpg\n",
+    )
+    .unwrap();
+    let data = dir.path().join("cars");
+    let assert = mvpcc()
+        .args(["prepare", "--meshes"])
+        .arg(&root)
+        .arg("--out")
+        .arg(&data)
+        .args(SMALL)
+        .args(["--up", "y", "--forward", "-z"])
+        .assert()
+        .success();
+    let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
+    for name in ["nofaces.obj", "nan.obj", "garbage.ply", "gone.jpg"] {
+        assert!(
+            stderr
+                .lines()
+                .any(|l| l.starts_with("warning: skipped") && l.contains(name)),
+            "{name} should be reported: {stderr}"
+        );
+    }
+    assert!(!stderr.contains("panicked"));
+    assert!(
+        stderr.contains("prepared 2 models") && stderr.contains("4 skipped"),
+        "{stderr}"
+    );
+    let manifest = read_json(&data.join("manifest.json"));
+    let names: Vec<&str> = manifest["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["1a2b", "3c4d"]);
+    assert!(manifest["models"][0]["category"] == "02958343");
+    assert_eq!(manifest["skipped"].as_array().unwrap().len(), 4);
+    fails(
+        &["prepare", "--meshes", "/no/such/dir", "--out", "o"],
+        "/no/such/dir",
+        "not a directory",
+        Path::new("o"),
+    );
+}
+
+/// Our view PNGs have the reference dataset's pixel format, so the two are interchangeable.
+#[test]
+fn prepared_views_match_the_reference_dataset_format() {
+    let reference = Path::new("../shared/reference/views/GT/train/02924116");
+    let Some(model) = std::fs::read_dir(reference)
+        .ok()
+        .and_then(|mut d| d.next())
+        .map(|e| e.unwrap().path())
+    else {
+        eprintln!("skipped: ../shared/reference/views is absent");
+        return;
+    };
+    let dir = TempDir::new().unwrap();
+    let data = dir.path().join("data");
+    mvpcc()
+        .args([
+            "prepare",
+            "--synth",
+            "1",
+            "--category",
+            "bus",
+            "--samples",
+            "1",
+            "--gt-size",
+            "128",
+        ])
+        .args(["--min-points", "1000", "--max-points", "2000", "--out"])
+        .arg(&data)
+        .assert()
+        .success();
+    let ours = tree(&data.join("GT"));
+    let loc = ours
+        .iter()
+        .find(|p| p.ends_with("locations_005.png"))
+        .unwrap();
+    assert_eq!(
+        loc.components().count(),
+        4,
+        "<split>/<category>/<name>/file: {loc:?}"
+    );
+    for (file, color) in [
+        ("locations_005.png", image::ColorType::Rgb16),
+        ("color_005.png", image::ColorType::Rgb8),
+    ] {
+        let theirs = image::open(model.join(file)).unwrap();
+        let mine = image::open(data.join("GT").join(loc.parent().unwrap()).join(file)).unwrap();
+        assert_eq!(theirs.color(), color);
+        assert_eq!(mine.color(), color);
+        assert_eq!(
+            (mine.width(), mine.height()),
+            (theirs.width(), theirs.height())
+        );
+    }
+}

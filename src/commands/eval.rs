@@ -226,17 +226,7 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
             (_, _, Some(pd), Some(gd)) => matched_pairs(pd, gd, args.input.format)?,
             _ => unreachable!("checked above: clouds were given"),
         };
-        let bar = if pairs.len() > 1 && !log.quiet() {
-            indicatif::ProgressBar::new(pairs.len() as u64)
-        } else {
-            indicatif::ProgressBar::hidden()
-        };
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:40} {pos}/{len} {msg} [{elapsed} < {eta}]",
-            )
-            .expect("a valid progress template"),
-        );
+        let bar = super::progress(pairs.len(), "eval", log);
         let mut results = Vec::with_capacity(pairs.len());
         for pair in &pairs {
             bar.set_message(pair.name.clone());

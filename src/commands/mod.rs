@@ -2,9 +2,11 @@
 
 mod eval;
 mod filter;
+mod prepare;
 mod profile;
 mod project;
 mod reproject;
+mod synth;
 
 use crate::cli::{Cli, Command};
 use crate::cloud::PointCloud;
@@ -20,6 +22,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Reproject(args) => reproject::run(args, log),
         Command::Filter(args) => filter::run(args, log),
         Command::Profile(args) => profile::run(args, log),
+        Command::Prepare(args) => prepare::run(args, log),
+        Command::Synth(args) => synth::run(args, log),
     }
 }
 
@@ -56,4 +60,20 @@ pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Res
         ));
     }
     Ok(loaded.cloud)
+}
+
+/// A progress bar with ETA on stderr; hidden under `--quiet` or for a single item.
+pub(crate) fn progress(len: usize, label: &str, log: Log) -> indicatif::ProgressBar {
+    let bar = if len > 1 && !log.quiet() {
+        indicatif::ProgressBar::new(len as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{label} {{bar:40}} {{pos}}/{{len}} {{msg}} [{{elapsed}} < {{eta}}]"
+        ))
+        .expect("a valid progress template"),
+    );
+    bar
 }

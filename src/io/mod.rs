@@ -3,7 +3,7 @@
 
 mod las;
 mod pcd;
-mod ply;
+pub(crate) mod ply;
 mod xyz;
 
 use crate::cloud::PointCloud;

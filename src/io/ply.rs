@@ -26,7 +26,7 @@ fn role(name: &str) -> Role {
     }
 }
 
-fn scalar_value(p: &Property) -> Option<f64> {
+pub(crate) fn scalar_value(p: &Property) -> Option<f64> {
     Some(match *p {
         Property::Char(v) => v as f64,
         Property::UChar(v) => v as f64,

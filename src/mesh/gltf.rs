@@ -1,0 +1,185 @@
+//! glTF 2.0 / GLB: every triangle primitive of the default scene, placed by its node
+//! transforms, with base-colour factors, base-colour textures and COLOR_0.
+
+use super::{linear_to_srgb, Material, Mesh, MeshError};
+use image::RgbImage;
+use nalgebra::{Matrix4, Point3};
+use std::path::Path;
+use std::sync::Arc;
+
+fn to_rgb(data: &::gltf::image::Data) -> Option<RgbImage> {
+    use ::gltf::image::Format;
+    let channels = match data.format {
+        Format::R8 => 1,
+        Format::R8G8 => 2,
+        Format::R8G8B8 => 3,
+        Format::R8G8B8A8 => 4,
+        _ => return None,
+    };
+    let pixels: Vec<u8> = data
+        .pixels
+        .chunks_exact(channels)
+        .flat_map(|p| match channels {
+            1 | 2 => [p[0]; 3],
+            _ => [p[0], p[1], p[2]],
+        })
+        .collect();
+    RgbImage::from_raw(data.width, data.height, pixels)
+}
+
+pub fn read(path: &Path) -> Result<Mesh, MeshError> {
+    let fail = |problem: String| MeshError::Read {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let (document, buffers, images) =
+        ::gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
+    let textures: Vec<Option<Arc<RgbImage>>> =
+        images.iter().map(|i| to_rgb(i).map(Arc::new)).collect();
+    let mut mesh = Mesh::default();
+    let scene = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+        .ok_or_else(|| fail("no scene".into()))?;
+    let mut stack: Vec<(::gltf::Node, Matrix4<f32>)> =
+        scene.nodes().map(|n| (n, Matrix4::identity())).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let local = Matrix4::from_column_slice(node.transform().matrix().as_flattened());
+        let world = parent * local;
+        stack.extend(node.children().map(|c| (c, world)));
+        let Some(gmesh) = node.mesh() else { continue };
+        for primitive in gmesh.primitives() {
+            if primitive.mode() != ::gltf::mesh::Mode::Triangles {
+                continue;
+            }
+            let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+            let Some(positions) = reader.read_positions() else {
+                continue;
+            };
+            let positions: Vec<[f32; 3]> = positions
+                .map(|p| {
+                    let q = world.transform_point(&Point3::from(p));
+                    [q.x, q.y, q.z]
+                })
+                .collect();
+            let n = positions.len() as u32;
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..n).collect(),
+            };
+            if indices.iter().any(|&i| i >= n) {
+                return Err(fail(
+                    "a triangle refers to a vertex that does not exist".into(),
+                ));
+            }
+            let pbr = primitive.material().pbr_metallic_roughness();
+            let factor = pbr.base_color_factor();
+            let texture_info = pbr.base_color_texture();
+            let texture = texture_info.as_ref().and_then(|t| {
+                textures
+                    .get(t.texture().source().index())
+                    .cloned()
+                    .flatten()
+            });
+            let uv_set = texture_info.as_ref().map_or(0, |t| t.tex_coord());
+            let uvs: Option<Vec<[f32; 2]>> = texture
+                .as_ref()
+                .and_then(|_| reader.read_tex_coords(uv_set))
+                .map(|t| t.into_f32().collect());
+            let colors: Option<Vec<[f32; 3]>> = reader
+                .read_colors(0)
+                .map(|c| c.into_rgb_f32().map(|c| c.map(linear_to_srgb)).collect());
+            let mut part = Mesh {
+                materials: vec![Material {
+                    name: format!("material_{}", primitive.material().index().unwrap_or(0)),
+                    color: [factor[0], factor[1], factor[2]].map(linear_to_srgb),
+                    texture: uvs.as_ref().and(texture),
+                }],
+                vertex_colors: colors,
+                ..Mesh::default()
+            };
+            for tri in indices.chunks_exact(3) {
+                part.triangles.push([tri[0], tri[1], tri[2]]);
+                part.material_of.push(0);
+            }
+            if let Some(uvs) = &uvs {
+                // glTF's v runs downwards; Mesh keeps OBJ's upward v.
+                part.corner_uv = Some(
+                    part.triangles
+                        .iter()
+                        .map(|t| {
+                            t.map(|i| {
+                                let [u, v] = uvs.get(i as usize).copied().unwrap_or([0.0; 2]);
+                                [u, 1.0 - v]
+                            })
+                        })
+                        .collect(),
+                );
+            }
+            part.positions = positions;
+            mesh.append(part);
+        }
+    }
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{read_mesh, ReadOptions};
+
+    /// A one-triangle glTF with its buffer inline, translated by its node and coloured by its
+    /// material's base-colour factor.
+    #[test]
+    fn reads_an_embedded_gltf_with_node_transform_and_base_colour() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bytes = Vec::new();
+        for v in [[0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+            for c in v {
+                bytes.extend(c.to_le_bytes());
+            }
+        }
+        let b64 = base64(&bytes);
+        let json = format!(
+            r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+            "nodes":[{{"mesh":0,"translation":[0,0,5]}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"material":0}}]}}],
+            "materials":[{{"pbrMetallicRoughness":{{"baseColorFactor":[1,0,0,1]}}}}],
+            "buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,{b64}"}}],
+            "bufferViews":[{{"buffer":0,"byteLength":36}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#
+        );
+        let path = dir.path().join("t.gltf");
+        std::fs::write(&path, json).unwrap();
+        let mesh = read_mesh(
+            &path,
+            ReadOptions {
+                allow_missing_materials: false,
+            },
+        )
+        .unwrap();
+        assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+        assert_eq!(mesh.positions[1], [1.0, 0.0, 5.0]);
+        assert_eq!(mesh.color_at(0, [1.0, 0.0, 0.0]), [255, 0, 0]);
+    }
+
+    fn base64(bytes: &[u8]) -> String {
+        const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        let mut out = String::new();
+        for chunk in bytes.chunks(3) {
+            let b = [
+                chunk[0],
+                *chunk.get(1).unwrap_or(&0),
+                *chunk.get(2).unwrap_or(&0),
+            ];
+            let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+            for k in 0..4 {
+                if k <= chunk.len() {
+                    out.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+                } else {
+                    out.push('=');
+                }
+            }
+        }
+        out
+    }
+}

@@ -91,6 +91,8 @@ pub fn prepare_model(
     layout: &Layout,
 ) -> Result<ModelEntry, PrepareError> {
     let split = split_of(&source.category, &source.name, params.train_fraction);
+    // Whatever an interrupted run left goes first, so a mesh that now fails leaves nothing.
+    clear(layout, split, source)?;
     let path = &source.path;
     let mut mesh = read_mesh(
         path,
@@ -120,7 +122,6 @@ pub fn prepare_model(
             path: path.clone(),
             problem,
         })?;
-    clear(layout, split, source)?;
     let seed = derive_seed(params.seed, &format!("{}/{}", source.category, source.name));
     let cameras = Camera::set(&params.views, params.size).map_err(|e| PrepareError::Normalize {
         path: path.clone(),

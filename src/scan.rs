@@ -342,6 +342,13 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
     let mut hit_tri = vec![u32::MAX; lines * angles];
     let mut hit_bary = vec![[0f32; 2]; lines * angles];
     let up = [0.0, 1.0, 0.0];
+    // One ray direction per elevation step, shared by every line and triangle.
+    let dirs: Vec<[f32; 3]> = (0..angles)
+        .map(|i| {
+            let (sin, cos) = (t0 + (i as f32 + 0.5) * step).sin_cos();
+            [0, 1, 2].map(|k| cos * path.out[k] + sin * up[k])
+        })
+        .collect();
     for (ti, tri) in mesh.triangles.iter().enumerate() {
         let [c0, c1, c2] = tri.map(|i| coords[i as usize]);
         let (lu, hu) = (c0.0.min(c1.0).min(c2.0), c0.0.max(c1.0).max(c2.0));
@@ -361,9 +368,7 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
             let o = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k]);
             let s = [0, 1, 2].map(|k| o[k] - p0[k]);
             for i in i0..=i1 as usize {
-                let theta = t0 + (i as f32 + 0.5) * step;
-                let (sin, cos) = theta.sin_cos();
-                let dir = [0, 1, 2].map(|k| cos * path.out[k] + sin * up[k]);
+                let dir = dirs[i];
                 // Möller–Trumbore.
                 let pv = cross(dir, e2);
                 let det = dot(e1, pv);
@@ -398,12 +403,8 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
             if hit_tri[at] == u32::MAX {
                 continue;
             }
-            let theta = t0 + (i as f32 + 0.5) * step;
-            let (sin, cos) = theta.sin_cos();
             let range = hit_t[at] + noise * rng.gauss() as f32;
-            let p = [0, 1, 2].map(|k| {
-                path.origin[k] + u * path.along[k] + range * (cos * path.out[k] + sin * up[k])
-            });
+            let p = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k] + range * dirs[i][k]);
             let [b1, b2] = hit_bary[at];
             out.points.push(path.to_path_frame(p));
             out.colors

@@ -367,8 +367,7 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
             let u = u0 + (j as f32 + 0.5) * line_spacing;
             let o = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k]);
             let s = [0, 1, 2].map(|k| o[k] - p0[k]);
-            for i in i0..=i1 as usize {
-                let dir = dirs[i];
+            for (i, &dir) in dirs.iter().enumerate().take(i1 as usize + 1).skip(i0) {
                 // Möller–Trumbore.
                 let pv = cross(dir, e2);
                 let det = dot(e1, pv);
@@ -398,13 +397,13 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
     let mut out = Surface::default();
     for j in 0..lines {
         let u = u0 + (j as f32 + 0.5) * line_spacing;
-        for i in 0..angles {
+        for (i, dir) in dirs.iter().enumerate() {
             let at = j * angles + i;
             if hit_tri[at] == u32::MAX {
                 continue;
             }
             let range = hit_t[at] + noise * rng.gauss() as f32;
-            let p = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k] + range * dirs[i][k]);
+            let p = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k] + range * dir[k]);
             let [b1, b2] = hit_bary[at];
             out.points.push(path.to_path_frame(p));
             out.colors

@@ -22,6 +22,8 @@ pub(super) struct SynthManifest {
 
 #[derive(Debug, Serialize, Deserialize, PartialEq)]
 pub(super) struct SynthEntry {
+    /// Generation index: with the run's seed and categories it gives the object back.
+    pub index: usize,
     pub name: String,
     pub category: Category,
     pub variant: String,
@@ -88,6 +90,7 @@ pub(super) fn generate(
                 .with_context(|| format!("{}: cannot write", path.display()))?;
             bar.inc(1);
             Ok(SynthEntry {
+                index: i,
                 name: s.name,
                 category: s.category,
                 variant: s.variant,
@@ -124,7 +127,7 @@ fn write_preview(out: &Path, manifest: &SynthManifest, log: Log) -> anyhow::Resu
         .objects
         .iter()
         .take(PREVIEW_OBJECTS)
-        .map(|o| synthesize(index_of(&o.name), manifest.seed, &manifest.categories).mesh)
+        .map(|o| synthesize(o.index, manifest.seed, &manifest.categories).mesh)
         .collect();
     let refs: Vec<&Mesh> = meshes.iter().collect();
     let sheet = contact_sheet(&refs, 192, 4);
@@ -137,12 +140,4 @@ fn write_preview(out: &Path, manifest: &SynthManifest, log: Log) -> anyhow::Resu
     .with_context(|| format!("{}: cannot write", path.display()))?;
     log.info(format!("preview: {}", path.display()));
     Ok(())
-}
-
-/// The generation index in a `<category>_<index>` name.
-fn index_of(name: &str) -> usize {
-    name.rsplit('_')
-        .next()
-        .and_then(|i| i.parse().ok())
-        .unwrap_or(0)
 }

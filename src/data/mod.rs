@@ -142,7 +142,8 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
         if entry.file_name().to_string_lossy().starts_with('.') {
             continue;
         }
-        if entry.file_type()?.is_dir() || (path.is_dir()) {
+        // Follows symbolic links, so a folder of linked datasets is walked too.
+        if path.is_dir() {
             walk(&path, out)?;
         } else if path
             .extension()

@@ -42,10 +42,10 @@ impl PrepareError {
     }
 }
 
-fn cloud_of(surface: &Surface) -> PointCloud {
+fn cloud_of(surface: Surface) -> PointCloud {
     let mut cloud =
         PointCloud::from_positions(surface.points.iter().map(|p| p.map(|c| c as f64)).collect());
-    cloud.colors = Some(surface.colors.clone());
+    cloud.colors = Some(surface.colors);
     cloud
 }
 
@@ -150,10 +150,11 @@ pub fn prepare_model(
             create_dir(&dir)?;
             let views = project(&surface.points, Some(&surface.colors), &cameras);
             write_views(&dir, &views)?;
+            let points = surface.len();
             if keep_partials {
                 write_cloud(
                     &clouds_dir.join(format!("partial_{k}.ply")),
-                    &cloud_of(&surface),
+                    &cloud_of(surface),
                     Some(Format::Ply),
                     Encoding::Binary,
                 )?;
@@ -161,14 +162,15 @@ pub fn prepare_model(
             Ok(SampleEntry {
                 k,
                 seed: sample_seed,
-                points: surface.len(),
+                points,
                 spec,
             })
         })
         .collect::<Result<Vec<_>, PrepareError>>()?;
+    let gt_points = gt.len();
     write_cloud(
         &clouds_dir.join("gt.ply"),
-        &cloud_of(&gt),
+        &cloud_of(gt),
         Some(Format::Ply),
         Encoding::Binary,
     )?;
@@ -180,7 +182,7 @@ pub fn prepare_model(
         seed,
         source_scale: 1.0 / scale,
         mesh: stats,
-        gt_points: gt.len(),
+        gt_points,
         samples,
     };
     let marker = clouds_dir.join(DONE_FILE);

@@ -45,6 +45,9 @@ pub enum Command {
     Prepare(PrepareArgs),
     /// Generate street-object meshes (cars, buses, trucks, trains, motorcycles) as OBJ + MTL.
     Synth(SynthArgs),
+    /// Train the inpainting GAN on a "shapenet-views" directory (from `mvpcc prepare` or the
+    /// original MVPCC data).
+    Train(TrainArgs),
 }
 
 /// How an input file is read.
@@ -364,4 +367,97 @@ pub struct SynthOptions {
     /// Seed of everything random: objects, samples, noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+}
+
+/// `mvpcc train`. Options left out take their defaults on a new run and the run's saved
+/// values (train.json, config.json) on `--resume`, where giving a different value is an error
+/// for everything but the operational options (steps, device, workers, prefetch, cache, log
+/// interval, checkpoints kept).
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Data: DIR/GT/train/<category>/<model>/ with DIR/in/train/<category>/<model>/<k>/; GT/test
+    /// validates when present, else a share of the training models is held back.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory: checkpoints/, best/, generator.safetensors, log.jsonl, losses.png,
+    /// samples/ [default: runs/<name of the data directory>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Rig cameras the model sees [default: 5,6,7,8].
+    #[arg(long)]
+    pub views: Option<ViewList>,
+    /// Image channels the model reads and writes [default: xyzrgb].
+    #[arg(long, value_enum)]
+    pub channels: Option<Channels>,
+    /// Model shape: paper, default (the CPU preset), small, tiny, or a JSON file holding a
+    /// model config (as a run's config.json) [default: default].
+    #[arg(long)]
+    pub config: Option<String>,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// Objects per micro-batch [default: 4].
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Micro-batches accumulated into one optimizer step [default: 1].
+    #[arg(long)]
+    pub accumulate: Option<usize>,
+    /// Stop after this many steps in all (a resumed run counts its earlier steps).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Continue the run in --out from its latest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Generator learning rate of the first stage; the second and third use 1/10 and 1/100 of
+    /// it [default: 1e-4].
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Most steps per stage [default: 100000].
+    #[arg(long)]
+    pub stage_steps: Option<u64>,
+    /// Validations without a better CD after which a stage ends [default: 5].
+    #[arg(long)]
+    pub patience: Option<usize>,
+    /// Steps between validations; 0 = never [default: 500].
+    #[arg(long)]
+    pub val_every: Option<u64>,
+    /// Validation samples (spread over the validation models) [default: 16].
+    #[arg(long)]
+    pub val_samples: Option<usize>,
+    /// Share of training models held back for validation when the data has no test split
+    /// [default: 0.05].
+    #[arg(long)]
+    pub val_fraction: Option<f64>,
+    /// Steps between checkpoints [default: 500].
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Checkpoints kept besides best/ [default: 3].
+    #[arg(long)]
+    pub keep: Option<usize>,
+    /// Steps between lines of log.jsonl [default: 10].
+    #[arg(long)]
+    pub log_every: Option<u64>,
+    /// Seed of initialization, sample order and augmentation [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Do not mirror samples x ↔ −x.
+    #[arg(long)]
+    pub no_mirror: bool,
+    /// Largest random yaw of a sample, degrees; 0 = off [default: 5].
+    #[arg(long)]
+    pub max_yaw: Option<f32>,
+    /// Largest relative colour gain change; 0 = off [default: 0.1].
+    #[arg(long)]
+    pub color_jitter: Option<f32>,
+    /// Threads that load and render samples while the network trains.
+    #[arg(long, default_value_t = 1)]
+    pub workers: usize,
+    /// Steps of data prepared ahead.
+    #[arg(long, default_value_t = 4)]
+    pub prefetch: usize,
+    /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
+    #[arg(long, default_value_t = 2048)]
+    pub cache_mb: usize,
+    /// Print the run's summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
 }

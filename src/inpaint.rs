@@ -25,6 +25,59 @@ pub enum InpaintError {
     },
 }
 
+/// Appends one object's network input: per view the channels' planes (geometry shifted into
+/// [0, 1] like the dataset's PNGs, empty pixels 0) and its occupancy plane.
+///
+/// # Shapes
+/// appends `[views, channels + 1, S, S]`
+pub fn encode_input(views: &ViewImages, channels: Channels, out: &mut Vec<f32>) {
+    for view in 0..views.views() {
+        encode_planes(views, view, channels, out);
+        encode_occupancy(views, view, out);
+    }
+}
+
+/// Appends one object's training target: the channels' planes as [`encode_input`] writes them
+/// to `images` and the occupancy to `occupancy`.
+///
+/// # Shapes
+/// appends `[views, channels, S, S]` and `[views, 1, S, S]`
+pub fn encode_target(
+    views: &ViewImages,
+    channels: Channels,
+    images: &mut Vec<f32>,
+    occupancy: &mut Vec<f32>,
+) {
+    for view in 0..views.views() {
+        encode_planes(views, view, channels, images);
+        encode_occupancy(views, view, occupancy);
+    }
+}
+
+fn encode_occupancy(views: &ViewImages, view: usize, out: &mut Vec<f32>) {
+    out.extend(
+        views
+            .view_occupancy(view)
+            .iter()
+            .map(|&o| if o { 1.0f32 } else { 0.0 }),
+    );
+}
+
+fn encode_planes(views: &ViewImages, view: usize, channels: Channels, out: &mut Vec<f32>) {
+    let plane = views.size * views.size;
+    let px = views.view_pixels(view);
+    let occupied = views.view_occupancy(view);
+    for ch in 0..channels.count() {
+        let src = &px[ch * plane..(ch + 1) * plane];
+        let shift = if ch < 3 { 0.5 } else { 0.0 };
+        out.extend(
+            src.iter()
+                .zip(occupied)
+                .map(|(&x, &o)| if o { x + shift } else { 0.0 }),
+        );
+    }
+}
+
 pub struct Inpainter {
     generator: Generator,
     config: ModelConfig,
@@ -93,24 +146,9 @@ impl Inpainter {
                 });
             }
         }
-        let plane = s * s;
-        let mut data = Vec::with_capacity(batch.len() * v * (c + 1) * plane);
+        let mut data = Vec::with_capacity(batch.len() * v * (c + 1) * s * s);
         for views in batch {
-            for view in 0..v {
-                let px = views.view_pixels(view);
-                let occupied = views.view_occupancy(view);
-                for ch in 0..c {
-                    let src = &px[ch * plane..(ch + 1) * plane];
-                    // Geometry is shifted into [0, 1] like the dataset's PNGs; empty stays 0.
-                    let shift = if ch < 3 { 0.5 } else { 0.0 };
-                    data.extend(
-                        src.iter()
-                            .zip(occupied)
-                            .map(|(&x, &o)| if o { x + shift } else { 0.0 }),
-                    );
-                }
-                data.extend(occupied.iter().map(|&o| if o { 1.0f32 } else { 0.0 }));
-            }
+            encode_input(views, self.config.channels, &mut data);
         }
         let shape = [batch.len(), v, c + 1, s, s];
         Ok(Tensor::from_data(
@@ -165,23 +203,9 @@ impl Inpainter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::Camera;
     use crate::model::weights::generator_to_bytes;
     use crate::model::Preset;
-    use crate::projection::project;
-    use crate::shapes::example_car;
-
-    fn car_views(size: usize) -> ViewImages {
-        let car = example_car();
-        let frame = crate::frame::Frame::fit(&car.cloud, crate::frame::UpAxis::Y).unwrap();
-        let normalized = frame.normalize(&car.cloud);
-        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, size).unwrap();
-        project(
-            &normalized.positions_f32(),
-            normalized.colors.as_deref(),
-            &cameras,
-        )
-    }
+    use crate::shapes::example_car_views;
 
     #[test]
     fn views_in_views_out_with_valid_geometry() {
@@ -190,7 +214,7 @@ mod tests {
         let g = config.init_generator(&device).unwrap();
         let bytes = generator_to_bytes(&g, &config).unwrap();
         let inpainter = Inpainter::from_bytes(&bytes, device).unwrap();
-        let views = car_views(32);
+        let views = example_car_views(32);
         let out = inpainter.inpaint(&[views.clone(), views.clone()]).unwrap();
         assert_eq!(out.len(), 2);
         for o in &out {
@@ -221,7 +245,7 @@ mod tests {
         let device = Device::flex();
         let config = Preset::Tiny.config();
         let inpainter = Inpainter::new(config.init_generator(&device).unwrap(), config, device);
-        let wrong_size = car_views(64);
+        let wrong_size = example_car_views(64);
         assert_eq!(
             inpainter.inpaint(&[wrong_size]).err(),
             Some(InpaintError::Size {
@@ -232,7 +256,7 @@ mod tests {
         );
         let three = ViewImages::empty(vec![5, 6, 7], 32, false);
         assert!(matches!(
-            inpainter.inpaint(&[car_views(32), three]),
+            inpainter.inpaint(&[example_car_views(32), three]),
             Err(InpaintError::Views { object: 1, .. })
         ));
     }

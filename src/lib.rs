@@ -6,7 +6,8 @@
 //! [`filter`] turn views back into a cloud, and [`metrics`] scores the result. [`model`] is the
 //! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
 //! Training data comes from meshes ([`mesh`], [`synth`]): [`raster`] renders them, [`scan`]
-//! samples ground truth and partial scans, and [`data`] writes the dataset.
+//! samples ground truth and partial scans, and [`data`] writes the dataset; [`train`] trains the
+//! network on it.
 
 pub mod camera;
 pub mod cli;
@@ -28,4 +29,5 @@ pub mod reprojection;
 pub mod scan;
 pub mod shapes;
 pub mod synth;
+pub mod train;
 pub mod views;

@@ -190,6 +190,21 @@ pub fn example_car() -> Sampled {
     car(16_000, 2026)
 }
 
+/// [`example_car`] normalized and projected into the default rig's views at `size`².
+pub fn example_car_views(size: usize) -> crate::projection::ViewImages {
+    let car = example_car();
+    let frame = crate::frame::Frame::fit(&car.cloud, crate::frame::UpAxis::Y)
+        .expect("the example car has an extent");
+    let normalized = frame.normalize(&car.cloud);
+    let cameras = crate::camera::Camera::set(&crate::camera::DEFAULT_VIEWS, size)
+        .expect("the default rig is valid");
+    crate::projection::project(
+        &normalized.positions_f32(),
+        normalized.colors.as_deref(),
+        &cameras,
+    )
+}
+
 /// What a scanner driving past on the +x side sees: surfaces facing it (and the roof), nothing
 /// of the far flank or the underside; the body hides what lies beyond x = −0.6 m.
 pub fn scanned_side(sampled: &Sampled) -> PointCloud {

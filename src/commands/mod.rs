@@ -7,6 +7,7 @@ mod profile;
 mod project;
 mod reproject;
 mod synth;
+mod train;
 
 use crate::cli::{Cli, Command};
 use crate::cloud::PointCloud;
@@ -24,6 +25,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Profile(args) => profile::run(args, log),
         Command::Prepare(args) => prepare::run(args, log),
         Command::Synth(args) => synth::run(args, log),
+        Command::Train(args) => train::run(args, log),
     }
 }
 

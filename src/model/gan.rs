@@ -5,9 +5,9 @@
 use super::loss::{discriminator_input, discriminator_loss, generator_losses, LossWeights, Target};
 use super::{ConfigError, Discriminator, Generator, ModelConfig};
 use burn::config::Config;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::tensor::activation::sigmoid;
-use burn::tensor::{Device, Tensor};
+use burn::tensor::{Bytes, Device, Tensor};
 
 /// Optimizer settings; the defaults are the original's (Adam, β = (0, 0.9), the
 /// discriminator at a tenth of the generator's rate).
@@ -38,8 +38,19 @@ pub struct Gan {
     d_optim: ModuleOptimizer,
 }
 
-/// The losses of one step, read back as numbers.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// One batch of inputs and their ground truth.
+///
+/// # Shapes
+/// `input`: `[B, V, C+1, S, S]`; `target.images`: `[B, V, C, S, S]`;
+/// `target.occupancy`: `[B, V, 1, S, S]`
+#[derive(Debug, Clone)]
+pub struct Batch {
+    pub input: Tensor<5>,
+    pub target: Target,
+}
+
+/// The losses of one step (averaged over its micro-batches), read back as numbers.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct StepLosses {
     pub discriminator: f32,
     pub generator: f32,
@@ -77,10 +88,7 @@ impl Gan {
         weights: LossWeights,
         optim: GanOptimConfig,
     ) -> Gan {
-        let adam = AdamConfig::new()
-            .with_beta_1(optim.beta_1)
-            .with_beta_2(optim.beta_2)
-            .with_epsilon(optim.epsilon);
+        let adam = adam_config(&optim);
         Gan {
             generator,
             discriminator,
@@ -92,51 +100,161 @@ impl Gan {
         }
     }
 
-    /// One step on a batch.
-    ///
-    /// # Shapes
-    /// `input`: `[B, V, C+1, S, S]`; `target.images`: `[B, V, C, S, S]`;
-    /// `target.occupancy`: `[B, V, 1, S, S]`
-    pub fn step(mut self, input: Tensor<5>, target: &Target) -> (Gan, StepLosses) {
-        let output = self.generator.forward(input);
-
-        let fake =
-            discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone())).detach();
-        let real = discriminator_input(target.images.clone(), target.occupancy.clone());
-        let d_loss = discriminator_loss(
-            self.weights.adversarial_kind,
-            self.discriminator.forward(real).logits,
-            self.discriminator.forward(fake).logits,
-        );
-        let d_grads = GradientsParams::from_grads(d_loss.backward(), &self.discriminator);
+    /// One optimizer step of both networks over `micro` batches, whose gradients are
+    /// accumulated (each loss divided by their number) so the effective batch is their sum.
+    /// Both networks' losses are taken against the discriminator as it was when the step
+    /// began, as the original computes its generator loss before the discriminator update.
+    /// `learning_rate` is the generator's; the discriminator's is `d_to_g_rate` times that.
+    pub fn step(mut self, micro: &[Batch], learning_rate: f64) -> (Gan, StepLosses) {
+        assert!(!micro.is_empty(), "a step needs at least one batch");
+        let share = 1.0 / micro.len() as f64;
+        let mut d_grads = GradientsAccumulator::<Discriminator>::new();
+        let mut g_grads = GradientsAccumulator::<Generator>::new();
+        let mut sum = StepLosses::default();
+        for batch in micro {
+            let output = self.generator.forward(batch.input.clone());
+            let target = &batch.target;
+            let fake =
+                discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone()))
+                    .detach();
+            let real = discriminator_input(target.images.clone(), target.occupancy.clone());
+            let d_loss = discriminator_loss(
+                self.weights.adversarial_kind,
+                self.discriminator.forward(real).logits,
+                self.discriminator.forward(fake).logits,
+            );
+            let g = generator_losses(&output, target, &self.discriminator, &self.weights);
+            d_grads.accumulate(
+                &self.discriminator,
+                GradientsParams::from_grads(
+                    d_loss.clone().mul_scalar(share).backward(),
+                    &self.discriminator,
+                ),
+            );
+            g_grads.accumulate(
+                &self.generator,
+                GradientsParams::from_grads(
+                    g.total.clone().mul_scalar(share).backward(),
+                    &self.generator,
+                ),
+            );
+            sum = sum.plus(&StepLosses {
+                discriminator: value(d_loss),
+                generator: value(g.total),
+                l1: value(g.l1),
+                adversarial: value(g.adversarial),
+                perceptual: value(g.perceptual),
+                style: value(g.style),
+                occupancy: value(g.occupancy),
+                tv: value(g.tv),
+            });
+        }
         self.discriminator = self.d_optim.step(
-            self.optim.learning_rate * self.optim.d_to_g_rate,
+            learning_rate * self.optim.d_to_g_rate,
             self.discriminator,
-            d_grads,
+            d_grads.grads(),
         );
-
-        let g = generator_losses(&output, target, &self.discriminator, &self.weights);
-        let g_grads = GradientsParams::from_grads(g.total.backward(), &self.generator);
         self.generator = self
             .g_optim
-            .step(self.optim.learning_rate, self.generator, g_grads);
+            .step(learning_rate, self.generator, g_grads.grads());
+        (self, sum.scaled(share as f32))
+    }
 
-        let value = |t: Tensor<1>| {
-            t.into_data()
-                .try_into_vec::<f32>()
-                .map_or(f32::NAN, |v| v[0])
+    /// Both optimizers' state (Adam moments and step counts), generator's first, in Burn's
+    /// burnpack format. They refer to parameters by id, so they only fit networks restored
+    /// with their ids (a burnpack module record, not a safetensors file).
+    pub fn optimizer_bytes(&self) -> Result<[Vec<u8>; 2], String> {
+        let bytes = |o: &ModuleOptimizer| {
+            o.into_bytes()
+                .map(|b| b.to_vec())
+                .map_err(|e| e.to_string())
         };
-        let losses = StepLosses {
-            discriminator: value(d_loss),
-            generator: value(g.total),
-            l1: value(g.l1),
-            adversarial: value(g.adversarial),
-            perceptual: value(g.perceptual),
-            style: value(g.style),
-            occupancy: value(g.occupancy),
-            tv: value(g.tv),
+        Ok([bytes(&self.g_optim)?, bytes(&self.d_optim)?])
+    }
+
+    /// Restores what [`Gan::optimizer_bytes`] saved.
+    pub fn load_optimizers(
+        mut self,
+        generator: &[u8],
+        discriminator: &[u8],
+    ) -> Result<Gan, String> {
+        let load = |o: ModuleOptimizer, b: &[u8]| {
+            o.from_bytes(Bytes::from_bytes_vec(b.to_vec()))
+                .map_err(|e| e.to_string())
         };
-        (self, losses)
+        let adam = self.adam();
+        self.g_optim = load(std::mem::replace(&mut self.g_optim, adam.init()), generator)?;
+        self.d_optim = load(
+            std::mem::replace(&mut self.d_optim, adam.init()),
+            discriminator,
+        )?;
+        Ok(self)
+    }
+
+    fn adam(&self) -> AdamConfig {
+        adam_config(&self.optim)
+    }
+}
+
+fn adam_config(optim: &GanOptimConfig) -> AdamConfig {
+    AdamConfig::new()
+        .with_beta_1(optim.beta_1)
+        .with_beta_2(optim.beta_2)
+        .with_epsilon(optim.epsilon)
+}
+
+/// A one-element loss read back as a number; NaN if the backend cannot give one.
+fn value(t: Tensor<1>) -> f32 {
+    t.into_data()
+        .try_into_vec::<f32>()
+        .map_or(f32::NAN, |v| v[0])
+}
+
+impl StepLosses {
+    pub fn plus(mut self, o: &StepLosses) -> StepLosses {
+        for (a, b) in self.terms_mut().into_iter().zip(o.terms()) {
+            *a += b.1;
+        }
+        self
+    }
+
+    pub fn scaled(mut self, factor: f32) -> StepLosses {
+        for a in self.terms_mut() {
+            *a *= factor;
+        }
+        self
+    }
+
+    /// Every term by name, in a fixed order.
+    pub fn terms(&self) -> [(&'static str, f32); 8] {
+        [
+            ("discriminator", self.discriminator),
+            ("generator", self.generator),
+            ("l1", self.l1),
+            ("adversarial", self.adversarial),
+            ("perceptual", self.perceptual),
+            ("style", self.style),
+            ("occupancy", self.occupancy),
+            ("tv", self.tv),
+        ]
+    }
+
+    fn terms_mut(&mut self) -> [&mut f32; 8] {
+        [
+            &mut self.discriminator,
+            &mut self.generator,
+            &mut self.l1,
+            &mut self.adversarial,
+            &mut self.perceptual,
+            &mut self.style,
+            &mut self.occupancy,
+            &mut self.tv,
+        ]
+    }
+
+    /// The first term that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<(&'static str, f32)> {
+        self.terms().into_iter().find(|(_, v)| !v.is_finite())
     }
 }
 
@@ -179,12 +297,13 @@ mod tests {
     fn train(weights: LossWeights, steps: usize) -> (Gan, Vec<StepLosses>) {
         let device = Device::flex().autodiff();
         device.seed(7);
-        let optim = GanOptimConfig::new().with_learning_rate(2e-3);
+        let optim = GanOptimConfig::new();
         let mut gan = Gan::new(Preset::Tiny.config(), weights, optim, &device).unwrap();
         let (input, target) = sample(&device);
+        let batch = [Batch { input, target }];
         let mut history = Vec::new();
         for _ in 0..steps {
-            let (next, losses) = gan.step(input.clone(), &target);
+            let (next, losses) = gan.step(&batch, 2e-3);
             gan = next;
             assert!(
                 [losses.generator, losses.discriminator]

@@ -1,0 +1,123 @@
+//! Training step time on the CPU (flex) for one object (all views) per step: the generator
+//! with smooth L1 and Adam alone (the shape of the PyTorch figures the issue quotes) and the
+//! full GAN step (discriminator, every loss term, both optimizers). Also what the loader
+//! spends rendering one step's samples, to check it stays out of the step's way.
+//! `MVPCC_BENCH_PAPER=1` adds the paper's shape (minutes per sample).
+
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Distribution, Tensor};
+use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::model::gan::{Batch, Gan, GanOptimConfig};
+use mvpcc::model::loss::{smooth_l1, LossWeights, Target};
+use mvpcc::model::{ModelConfig, Preset};
+use mvpcc::shapes::{example_car_views, Lcg};
+use mvpcc::train::dataset::{load_sample, AugmentSettings, Cache, SampleRef};
+use mvpcc::views::write_views;
+use std::time::Duration;
+
+fn presets() -> Vec<Preset> {
+    let mut p = vec![Preset::Small, Preset::Cpu];
+    if std::env::var_os("MVPCC_BENCH_PAPER").is_some() {
+        p.push(Preset::Paper);
+    }
+    p
+}
+
+fn batch(config: &ModelConfig, device: &Device) -> Batch {
+    let (v, c, s) = (config.views, config.channels.count(), config.size);
+    let occupancy = Tensor::<5>::random([1, v, 1, s, s], Distribution::Bernoulli(0.4), device);
+    let images =
+        Tensor::<5>::random([1, v, c, s, s], Distribution::Default, device) * occupancy.clone();
+    let seen =
+        occupancy.clone() * Tensor::random([1, v, 1, s, s], Distribution::Bernoulli(0.5), device);
+    Batch {
+        input: Tensor::cat(vec![images.clone() * seen.clone(), seen], 2),
+        target: Target { images, occupancy },
+    }
+}
+
+fn training_step(c: &mut Criterion) {
+    let device = Device::flex().autodiff();
+    let mut group = c.benchmark_group("training step (flex, 1 object)");
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(30));
+    for preset in presets() {
+        let config = preset.config();
+        let name = format!("{preset:?}").to_lowercase();
+        let data = batch(&config, &device);
+
+        let mut generator = Some(config.init_generator(&device).unwrap());
+        let mut adam = AdamConfig::new().with_beta_1(0.0).with_beta_2(0.9).init();
+        group.bench_function(format!("{name}: generator + L1 + Adam"), |b| {
+            b.iter(|| {
+                let g = generator.take().unwrap();
+                let out = g.forward(data.input.clone());
+                let loss = smooth_l1(out.images, data.target.images.clone());
+                let grads = GradientsParams::from_grads(loss.backward(), &g);
+                generator = Some(adam.step(1e-4, g, grads));
+            })
+        });
+
+        let mut gan = Some(
+            Gan::new(
+                config.clone(),
+                LossWeights::new(),
+                GanOptimConfig::new(),
+                &device,
+            )
+            .unwrap(),
+        );
+        let micro = [data];
+        group.bench_function(format!("{name}: full GAN step"), |b| {
+            b.iter(|| {
+                let (next, losses) = gan.take().unwrap().step(&micro, 1e-4);
+                gan = Some(next);
+                losses
+            })
+        });
+    }
+    group.finish();
+}
+
+/// Four samples of a car scanned at 256² rendered at the CPU model's 128² with mirror, yaw and
+/// colour jitter, as the loader does for one step of `--batch 4`, from its cache.
+fn loader_step(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let views = example_car_views(256);
+    for sub in ["gt", "in"] {
+        write_views(&dir.path().join(sub), &views).unwrap();
+    }
+    let sample = SampleRef {
+        category: "car".into(),
+        name: "example".into(),
+        sample: "1".into(),
+        gt: dir.path().join("gt"),
+        input: dir.path().join("in"),
+        clouds: None,
+    };
+    let cameras = Camera::set(&DEFAULT_VIEWS, Preset::Cpu.config().size).unwrap();
+    let cache = Cache::new(1 << 30);
+    let settings = AugmentSettings {
+        mirror: true,
+        max_yaw_deg: 5.0,
+        color_jitter: 0.1,
+    };
+    let mut rng = Lcg::new(1);
+    c.bench_function(
+        "loader: render one step of 4 samples (256² → 128², cached)",
+        |b| {
+            b.iter(|| {
+                (0..4)
+                    .map(|_| {
+                        load_sample(&sample, &cameras, &settings.draw(&mut rng), &cache).unwrap()
+                    })
+                    .count()
+            })
+        },
+    );
+}
+
+criterion_group!(benches, training_step, loader_step);
+criterion_main!(benches);

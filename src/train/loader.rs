@@ -1,0 +1,157 @@
+//! Batches assembled on worker threads while the network trains: a producer thread draws the
+//! samples of each step in [`DrawOrder`], renders them on its own thread pool and queues up to
+//! `prefetch` steps ahead.
+
+use super::dataset::{load_sample, AugmentSettings, Cache, DataError, DrawOrder, SampleRef};
+use crate::camera::Camera;
+use crate::inpaint::{encode_input, encode_target};
+use crate::model::gan::Batch;
+use crate::model::loss::Target;
+use crate::model::Channels;
+use burn::tensor::{Device, Tensor, TensorData};
+use rayon::prelude::*;
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::sync::Arc;
+
+/// One micro-batch in host memory.
+///
+/// # Shapes
+/// `input`: `[B, V, C+1, S, S]`, `images`: `[B, V, C, S, S]`, `occupancy`: `[B, V, 1, S, S]`
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostBatch {
+    pub input: Vec<f32>,
+    pub images: Vec<f32>,
+    pub occupancy: Vec<f32>,
+    /// `[B, V, C, S]`.
+    pub dims: [usize; 4],
+}
+
+impl HostBatch {
+    pub fn to_device(self, device: &Device) -> Batch {
+        let [b, v, c, s] = self.dims;
+        let tensor = |data: Vec<f32>, planes: usize| {
+            Tensor::<5>::from_data(TensorData::new(data, [b, v, planes, s, s]), device)
+        };
+        Batch {
+            input: tensor(self.input, c + 1),
+            target: Target {
+                images: tensor(self.images, c),
+                occupancy: tensor(self.occupancy, 1),
+            },
+        }
+    }
+}
+
+/// What one optimizer step trains on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepData {
+    pub step: u64,
+    pub micro: Vec<HostBatch>,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct LoaderPlan {
+    pub seed: u64,
+    pub batch: usize,
+    pub accumulate: usize,
+    /// The first step to produce (0-based): a resumed run starts where it left off.
+    pub first_step: u64,
+    pub augment: AugmentSettings,
+    pub channels: Channels,
+    pub prefetch: usize,
+    pub workers: usize,
+}
+
+pub struct Loader {
+    rx: Receiver<Result<StepData, DataError>>,
+}
+
+impl Loader {
+    pub fn spawn(
+        samples: Arc<Vec<SampleRef>>,
+        cameras: Vec<Camera>,
+        cache: Arc<Cache>,
+        plan: LoaderPlan,
+    ) -> Loader {
+        let (tx, rx) = sync_channel(plan.prefetch.max(1));
+        std::thread::spawn(move || {
+            let pool = match rayon::ThreadPoolBuilder::new()
+                .num_threads(plan.workers.max(1))
+                .thread_name(|i| format!("mvpcc-loader-{i}"))
+                .build()
+            {
+                Ok(pool) => pool,
+                Err(e) => {
+                    let _ = tx.send(Err(DataError::Io {
+                        path: "loader threads".into(),
+                        source: std::io::Error::other(e),
+                    }));
+                    return;
+                }
+            };
+            let mut order = DrawOrder::new(plan.seed, samples.len());
+            let per_step = (plan.batch * plan.accumulate) as u64;
+            for step in plan.first_step.. {
+                let draws: Vec<_> = (0..per_step)
+                    .map(|j| {
+                        let (index, mut rng) = order.draw(step * per_step + j);
+                        (index, plan.augment.draw(&mut rng))
+                    })
+                    .collect();
+                let rendered = pool.install(|| {
+                    draws
+                        .par_iter()
+                        .map(|(index, augment)| {
+                            load_sample(&samples[*index], &cameras, augment, &cache)
+                        })
+                        .collect::<Result<Vec<_>, _>>()
+                });
+                let data = rendered.map(|rendered| StepData {
+                    step,
+                    micro: rendered
+                        .chunks(plan.batch)
+                        .map(|chunk| {
+                            let mut batch = HostBatch {
+                                input: Vec::new(),
+                                images: Vec::new(),
+                                occupancy: Vec::new(),
+                                dims: [
+                                    chunk.len(),
+                                    cameras.len(),
+                                    plan.channels.count(),
+                                    cameras[0].size,
+                                ],
+                            };
+                            for r in chunk {
+                                encode_input(&r.input, plan.channels, &mut batch.input);
+                                encode_target(
+                                    &r.target,
+                                    plan.channels,
+                                    &mut batch.images,
+                                    &mut batch.occupancy,
+                                );
+                            }
+                            batch
+                        })
+                        .collect(),
+                });
+                let failed = data.is_err();
+                // The receiver is gone when training ended: stop producing.
+                if tx.send(data).is_err() || failed {
+                    return;
+                }
+            }
+        });
+        Loader { rx }
+    }
+
+    /// The next step's data, waiting for it if the workers are behind.
+    pub fn next(&self) -> Result<StepData, DataError> {
+        self.rx.recv().unwrap_or_else(|_| {
+            Err(DataError::Io {
+                path: "loader threads".into(),
+                source: std::io::Error::other("the data loader stopped"),
+            })
+        })
+    }
+}

@@ -1,0 +1,746 @@
+//! The GAN training loop behind `mvpcc train`: samples from a "shapenet-views" directory
+//! ([`dataset`]) assembled ahead of time on worker threads ([`loader`]), Adam on both networks
+//! through three learning-rate stages, validation of images and of the completed clouds
+//! ([`validate`]), checkpoints that resume exactly ([`checkpoint`]) and the pictures a person
+//! watches ([`plot`]).
+
+pub mod checkpoint;
+pub mod dataset;
+pub mod loader;
+pub mod plot;
+pub mod validate;
+
+use crate::camera::Camera;
+use crate::inpaint::Inpainter;
+use crate::io::atomic_write;
+use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
+use crate::model::loss::LossWeights;
+use crate::model::ModelConfig;
+use burn::module::Module;
+use checkpoint::{CheckpointError, TrainState, GENERATOR_WEIGHTS};
+use dataset::{hold_back, scan_split, AugmentSettings, Cache, DataError, SampleRef};
+use loader::{Loader, LoaderPlan};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+use thiserror::Error;
+use validate::{Scores, ValItem};
+
+pub const LOG_FILE: &str = "log.jsonl";
+pub const LOSSES_PNG: &str = "losses.png";
+pub const SAMPLES_DIR: &str = "samples";
+pub const SETTINGS_FILE: &str = "train.json";
+pub const CONFIG_FILE: &str = "config.json";
+
+/// Everything that shapes a run's result besides the model config; saved as `train.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainSettings {
+    pub views: Vec<usize>,
+    /// Objects per micro-batch.
+    pub batch: usize,
+    /// Micro-batches whose gradients are summed into one step.
+    pub accumulate: usize,
+    /// Generator learning rate of each stage, in order.
+    pub stage_rates: Vec<f64>,
+    /// Most steps a stage runs.
+    pub stage_steps: u64,
+    /// Validations without a better CD after which a stage ends.
+    pub patience: usize,
+    pub val_every: u64,
+    pub val_samples: usize,
+    /// Fraction of the training models held back for validation when the data has no test
+    /// split.
+    pub val_fraction: f64,
+    pub checkpoint_every: u64,
+    /// Checkpoints kept (the best is kept apart in `best/`).
+    pub keep: usize,
+    pub log_every: u64,
+    pub seed: u64,
+    pub augment: AugmentSettings,
+    pub loss: LossWeights,
+    pub optim: GanOptimConfig,
+}
+
+impl TrainSettings {
+    /// The original schedule: lr 1e-4 → 1e-5 → 1e-6.
+    pub fn new(views: Vec<usize>) -> TrainSettings {
+        TrainSettings {
+            views,
+            batch: 4,
+            accumulate: 1,
+            stage_rates: vec![1e-4, 1e-5, 1e-6],
+            stage_steps: 100_000,
+            patience: 5,
+            val_every: 500,
+            val_samples: 16,
+            val_fraction: 0.05,
+            checkpoint_every: 500,
+            keep: 3,
+            log_every: 10,
+            seed: 0,
+            augment: AugmentSettings {
+                mirror: true,
+                max_yaw_deg: 5.0,
+                color_jitter: 0.1,
+            },
+            loss: LossWeights::new(),
+            optim: GanOptimConfig::new(),
+        }
+    }
+
+    /// The most steps the stages can take together.
+    pub fn planned_steps(&self) -> u64 {
+        self.stage_steps * self.stage_rates.len() as u64
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Data(#[from] DataError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {problem}", path.display())]
+    Run { path: PathBuf, problem: String },
+    #[error(
+        "the {term} loss is {value} at step {step}; stopped without saving, {}",
+        last_good.as_ref().map_or("no checkpoint was written yet".to_string(),
+            |p| format!("the last good checkpoint is {}", p.display()))
+    )]
+    NonFinite {
+        term: &'static str,
+        value: f32,
+        step: u64,
+        last_good: Option<PathBuf>,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// One line of `log.jsonl`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum LogRecord {
+    /// Losses averaged over the steps since the previous record.
+    Train {
+        step: u64,
+        stage: usize,
+        learning_rate: f64,
+        losses: StepLosses,
+        steps_per_second: f64,
+        /// Share of the interval's time the loop waited for data.
+        data_wait: f64,
+    },
+    Validation {
+        step: u64,
+        stage: usize,
+        scores: Scores,
+    },
+    /// The partial inputs scored as if they were the output, once per run.
+    Baseline { scores: Scores },
+}
+
+impl LogRecord {
+    fn step(&self) -> u64 {
+        match self {
+            LogRecord::Train { step, .. } | LogRecord::Validation { step, .. } => *step,
+            LogRecord::Baseline { .. } => 0,
+        }
+    }
+}
+
+/// What a run needs besides its settings.
+pub struct Job {
+    pub data: PathBuf,
+    pub run: PathBuf,
+    pub model: ModelConfig,
+    pub settings: TrainSettings,
+    /// Stop once this many steps are done (counting those before a resume).
+    pub max_steps: Option<u64>,
+    /// Where the networks run; gradients are recorded on top of it.
+    pub device: burn::tensor::Device,
+    pub resume: bool,
+    pub workers: usize,
+    pub prefetch: usize,
+    pub cache_bytes: usize,
+}
+
+/// What the person running the loop sees; the command layer draws it.
+pub trait Monitor {
+    fn message(&mut self, text: &str);
+    /// Called once before the first step with the step to start from and the most steps planned.
+    fn start(&mut self, first_step: u64, planned: u64);
+    fn stepped(&mut self, step: u64, losses: &StepLosses);
+    fn record(&mut self, record: &LogRecord);
+    /// Polled before each step: a true stops the run after a checkpoint.
+    fn interrupted(&self) -> bool;
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Every stage ended.
+    Finished,
+    /// `max_steps` reached.
+    StepLimit,
+    Interrupted,
+}
+
+#[derive(Debug)]
+pub struct Summary {
+    pub outcome: Outcome,
+    pub state: TrainState,
+    pub checkpoint: PathBuf,
+    pub baseline: Option<Scores>,
+    pub last: Option<Scores>,
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), TrainError> {
+    atomic_write(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)
+    })
+    .map_err(io_err(path))
+}
+
+/// Reads back `log.jsonl`, keeping what happened up to `step` (a crash may have logged past the
+/// checkpoint a resume starts from).
+fn read_log(path: &Path, step: u64) -> Result<Vec<LogRecord>, TrainError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(io_err(path)(e)),
+    };
+    Ok(text
+        .lines()
+        .filter_map(|l| serde_json::from_str::<LogRecord>(l).ok())
+        .filter(|r| r.step() <= step)
+        .collect())
+}
+
+struct RunLog {
+    path: PathBuf,
+    records: Vec<LogRecord>,
+}
+
+impl RunLog {
+    fn open(run: &Path, step: u64) -> Result<RunLog, TrainError> {
+        let path = run.join(LOG_FILE);
+        let records = read_log(&path, step)?;
+        atomic_write(&path, |w| {
+            for r in &records {
+                serde_json::to_writer(&mut *w, r).map_err(std::io::Error::other)?;
+                w.write_all(b"\n")?;
+            }
+            Ok(())
+        })
+        .map_err(io_err(&path))?;
+        Ok(RunLog { path, records })
+    }
+
+    fn push(&mut self, record: LogRecord) -> Result<(), TrainError> {
+        let mut line = serde_json::to_vec(&record).map_err(|e| io_err(&self.path)(e.into()))?;
+        line.push(b'\n');
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&self.path)
+            .and_then(|mut f| f.write_all(&line))
+            .map_err(io_err(&self.path))?;
+        self.records.push(record);
+        Ok(())
+    }
+
+    fn draw(&self, run: &Path) -> Result<(), TrainError> {
+        let mut train: [Vec<(f64, f64)>; 3] = Default::default();
+        let mut val: [Vec<(f64, f64)>; 3] = Default::default();
+        let mut base: [Option<f64>; 3] = [None; 3];
+        let mut max_x: f64 = 1.0;
+        for r in &self.records {
+            match r {
+                LogRecord::Train { step, losses, .. } => {
+                    let x = *step as f64;
+                    max_x = max_x.max(x);
+                    train[0].push((x, losses.generator as f64));
+                    train[1].push((x, losses.discriminator as f64));
+                    train[2].push((x, losses.l1 as f64));
+                }
+                LogRecord::Validation { step, scores, .. } => {
+                    let x = *step as f64;
+                    max_x = max_x.max(x);
+                    val[0].push((x, scores.cd.unwrap_or(f64::NAN)));
+                    val[1].push((x, scores.f1));
+                    val[2].push((x, scores.geometry.psnr));
+                }
+                LogRecord::Baseline { scores } => {
+                    base = [scores.cd, Some(scores.f1), Some(scores.geometry.psnr)];
+                }
+            }
+        }
+        let baselines: Vec<[(f64, f64); 2]> = base
+            .iter()
+            .map(|b| {
+                let v = b.unwrap_or(f64::NAN);
+                [(0.0, v), (max_x, v)]
+            })
+            .collect();
+        let mut panels: Vec<plot::Panel> = ["G LOSS", "D LOSS", "L1"]
+            .into_iter()
+            .zip(&train)
+            .map(|(title, points)| plot::Panel {
+                title,
+                series: vec![plot::Series {
+                    points,
+                    color: plot::TRAIN,
+                }],
+                log: title == "L1",
+            })
+            .collect();
+        for (i, title) in ["VAL CD", "VAL F1", "VAL PSNR"].into_iter().enumerate() {
+            panels.push(plot::Panel {
+                title,
+                series: vec![
+                    plot::Series {
+                        points: &baselines[i],
+                        color: plot::BASELINE,
+                    },
+                    plot::Series {
+                        points: &val[i],
+                        color: plot::VALIDATION,
+                    },
+                ],
+                log: i == 0,
+            });
+        }
+        let img = plot::panels(&panels, max_x);
+        save_png(&run.join(LOSSES_PNG), &img)
+    }
+}
+
+fn save_png(path: &Path, img: &image::RgbImage) -> Result<(), TrainError> {
+    atomic_write(path, |w| {
+        let mut bytes = Vec::new();
+        img.write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Png,
+        )
+        .map_err(std::io::Error::other)?;
+        w.write_all(&bytes)
+    })
+    .map_err(io_err(path))
+}
+
+/// Training and validation samples: the data's test split when it has one, else a held-back
+/// share of the training models.
+pub fn samples(
+    data: &Path,
+    val_fraction: f64,
+) -> Result<(Vec<SampleRef>, Vec<SampleRef>, String), TrainError> {
+    let train = scan_split(data, "train")?;
+    if data.join("GT").join("test").is_dir() {
+        let test = scan_split(data, "test")?;
+        let what = format!(
+            "{} samples of {} models for training, {} of {} test models for validation",
+            train.samples.len(),
+            train.models,
+            test.samples.len(),
+            test.models
+        );
+        return Ok((train.samples, test.samples, what));
+    }
+    let (train_samples, val) = hold_back(train.samples, val_fraction);
+    if train_samples.is_empty() {
+        return Err(TrainError::Run {
+            path: data.to_path_buf(),
+            problem: "holding back the validation models leaves nothing to train on".into(),
+        });
+    }
+    let what = format!(
+        "{} samples for training, {} held back for validation (no test split)",
+        train_samples.len(),
+        val.len()
+    );
+    Ok((train_samples, val, what))
+}
+
+struct Validator {
+    items: Vec<ValItem>,
+    device: burn::tensor::Device,
+    batch: usize,
+}
+
+impl Validator {
+    fn run(&self, gan: &Gan, run: &Path, step: u64) -> Result<Scores, TrainError> {
+        let inpainter = Inpainter::new(
+            gan.generator.valid(),
+            gan.config.clone(),
+            self.device.clone(),
+        );
+        let (scores, outputs) = validate::validate(&inpainter, &self.items, self.batch);
+        let first = &self.items[0];
+        let color = scores.color.is_some();
+        let grid = plot::sample_grid(&first.input, &outputs[0], &first.target, color);
+        let dir = run.join(SAMPLES_DIR);
+        std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+        save_png(&dir.join(format!("{step:08}.png")), &grid)?;
+        Ok(scores)
+    }
+}
+
+/// Runs (or resumes) training until every stage ends, `max_steps` is reached or the monitor
+/// interrupts; a checkpoint is written in each case.
+pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError> {
+    let settings = &job.settings;
+    let run = &job.run;
+    std::fs::create_dir_all(run).map_err(io_err(run))?;
+    let (train_samples, val_samples, what) = samples(&job.data, settings.val_fraction)?;
+    monitor.message(&what);
+    let cameras = Camera::set(&settings.views, job.model.size).map_err(|e| TrainError::Run {
+        path: job.data.clone(),
+        problem: e.to_string(),
+    })?;
+    let cache = Arc::new(Cache::new(job.cache_bytes));
+    let val_items = validate::build(
+        &validate::pick(&val_samples, settings.val_samples),
+        &cameras,
+        &cache,
+    )?;
+
+    let autodiff = job.device.clone().autodiff();
+    let (mut gan, mut state) = match checkpoint::latest(run)? {
+        Some(dir) if job.resume => {
+            let (gan, state) = checkpoint::load(
+                &dir,
+                job.model.clone(),
+                settings.loss.clone(),
+                settings.optim.clone(),
+                &autodiff,
+            )?;
+            monitor.message(&format!("resuming from {} (step {})", dir.display(), state.step));
+            (gan, state)
+        }
+        Some(dir) => {
+            return Err(TrainError::Run {
+                path: run.clone(),
+                problem: format!(
+                    "already holds a training run ({}); pass --resume to continue it or choose another --out",
+                    dir.display()
+                ),
+            })
+        }
+        None if job.resume => {
+            return Err(TrainError::Run {
+                path: run.clone(),
+                problem: "no checkpoint to resume from".into(),
+            })
+        }
+        None => {
+            autodiff.seed(settings.seed);
+            let gan = Gan::new(
+                job.model.clone(),
+                settings.loss.clone(),
+                settings.optim.clone(),
+                &autodiff,
+            )
+            .map_err(|e| TrainError::Run {
+                path: run.clone(),
+                problem: e.to_string(),
+            })?;
+            (gan, TrainState::new())
+        }
+    };
+    write_json(&run.join(CONFIG_FILE), &job.model)?;
+    write_json(&run.join(SETTINGS_FILE), settings)?;
+
+    let mut log = RunLog::open(run, state.step)?;
+    let validator = (!val_items.is_empty()).then(|| Validator {
+        items: val_items,
+        device: job.device.clone(),
+        batch: settings.batch,
+    });
+    let baseline = match &validator {
+        Some(v) => {
+            let scores = validate::baseline(&v.items);
+            if !log
+                .records
+                .iter()
+                .any(|r| matches!(r, LogRecord::Baseline { .. }))
+            {
+                let record = LogRecord::Baseline {
+                    scores: scores.clone(),
+                };
+                monitor.record(&record);
+                log.push(record)?;
+            }
+            Some(scores)
+        }
+        None => {
+            monitor.message("no validation samples: stages end by their step budget only");
+            None
+        }
+    };
+
+    let loader = Loader::spawn(
+        Arc::new(train_samples),
+        cameras,
+        cache,
+        LoaderPlan {
+            seed: settings.seed,
+            batch: settings.batch,
+            accumulate: settings.accumulate,
+            first_step: state.step,
+            augment: settings.augment,
+            channels: job.model.channels,
+            prefetch: job.prefetch,
+            workers: job.workers,
+        },
+    );
+    let planned = job.max_steps.map_or(settings.planned_steps(), |m| {
+        m.min(settings.planned_steps())
+    });
+    monitor.start(state.step, planned);
+
+    let mut last_checkpoint = checkpoint::latest(run)?;
+    let mut last_scores = None;
+    let mut interval = Interval::new();
+    let outcome = loop {
+        if state.finished {
+            break Outcome::Finished;
+        }
+        if job.max_steps.is_some_and(|m| state.step >= m) {
+            break Outcome::StepLimit;
+        }
+        if monitor.interrupted() {
+            break Outcome::Interrupted;
+        }
+        let waited = Instant::now();
+        let data = loader.next()?;
+        debug_assert_eq!(data.step, state.step);
+        let started = Instant::now();
+        interval.wait += (started - waited).as_secs_f64();
+        let rate = settings.stage_rates[state.stage];
+        // The total-variation term joins from the second stage on, as in the original.
+        gan.weights.tv = if state.stage == 0 {
+            0.0
+        } else {
+            settings.loss.tv
+        };
+        let batches = data
+            .micro
+            .into_iter()
+            .map(|b| b.to_device(&autodiff))
+            .collect::<Vec<_>>();
+        let (next, losses) = gan.step(&batches, rate);
+        gan = next;
+        if let Some((term, value)) = losses.first_non_finite() {
+            return Err(TrainError::NonFinite {
+                term,
+                value,
+                step: state.step + 1,
+                last_good: last_checkpoint,
+            });
+        }
+        state.step += 1;
+        interval.add(&losses, started.elapsed().as_secs_f64());
+        monitor.stepped(state.step, &losses);
+
+        if state.step.is_multiple_of(settings.log_every.max(1)) {
+            let record = interval.record(state.step, state.stage, rate);
+            monitor.record(&record);
+            log.push(record)?;
+        }
+        let mut improved = false;
+        if let Some(v) = validator
+            .as_ref()
+            .filter(|_| settings.val_every > 0 && state.step.is_multiple_of(settings.val_every))
+        {
+            let scores = v.run(&gan, run, state.step)?;
+            improved = advance_on_validation(&mut state, &scores);
+            let record = LogRecord::Validation {
+                step: state.step,
+                stage: state.stage,
+                scores: scores.clone(),
+            };
+            monitor.record(&record);
+            log.push(record)?;
+            log.draw(run)?;
+            last_scores = Some(scores);
+        }
+        let budget_spent = state.step - state.stage_start >= settings.stage_steps;
+        if budget_spent || state.validations_without_improvement >= settings.patience.max(1) {
+            state.stage += 1;
+            state.stage_start = state.step;
+            state.stage_best_cd = None;
+            state.validations_without_improvement = 0;
+            if state.stage >= settings.stage_rates.len() {
+                state.finished = true;
+            } else {
+                monitor.message(&format!(
+                    "step {}: stage {} (learning rate {:e})",
+                    state.step,
+                    state.stage + 1,
+                    settings.stage_rates[state.stage]
+                ));
+            }
+        }
+        if improved || state.step.is_multiple_of(settings.checkpoint_every.max(1)) {
+            let dir = checkpoint::save(run, &gan, &state, settings.keep)?;
+            if improved {
+                checkpoint::keep_as_best(run, &dir)?;
+            }
+            last_checkpoint = Some(dir);
+        }
+    };
+
+    let dir = match &last_checkpoint {
+        Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
+        _ => checkpoint::save(run, &gan, &state, settings.keep)?,
+    };
+    let weights = run.join(GENERATOR_WEIGHTS);
+    std::fs::copy(dir.join(GENERATOR_WEIGHTS), &weights).map_err(io_err(&weights))?;
+    log.draw(run)?;
+    Ok(Summary {
+        outcome,
+        state,
+        checkpoint: dir,
+        baseline,
+        last: last_scores,
+    })
+}
+
+/// Updates the best scores and the patience counter; true when the CD is the run's best.
+fn advance_on_validation(state: &mut TrainState, scores: &Scores) -> bool {
+    let Some(cd) = scores.cd else {
+        state.validations_without_improvement += 1;
+        return false;
+    };
+    if state.stage_best_cd.is_none_or(|b| cd < b) {
+        state.stage_best_cd = Some(cd);
+        state.validations_without_improvement = 0;
+    } else {
+        state.validations_without_improvement += 1;
+    }
+    if state.best_cd.is_none_or(|b| cd < b) {
+        state.best_cd = Some(cd);
+        state.best_step = Some(state.step);
+        return true;
+    }
+    false
+}
+
+/// Loss sums and timings since the last log record.
+struct Interval {
+    sum: StepLosses,
+    steps: u32,
+    busy: f64,
+    wait: f64,
+}
+
+impl Interval {
+    fn new() -> Interval {
+        Interval {
+            sum: StepLosses::default(),
+            steps: 0,
+            busy: 0.0,
+            wait: 0.0,
+        }
+    }
+
+    fn add(&mut self, losses: &StepLosses, seconds: f64) {
+        self.sum = self.sum.plus(losses);
+        self.steps += 1;
+        self.busy += seconds;
+    }
+
+    fn record(&mut self, step: u64, stage: usize, learning_rate: f64) -> LogRecord {
+        let total = self.busy + self.wait;
+        let record = LogRecord::Train {
+            step,
+            stage,
+            learning_rate,
+            losses: self.sum.scaled(1.0 / self.steps.max(1) as f32),
+            steps_per_second: self.steps as f64 / total.max(1e-9),
+            data_wait: self.wait / total.max(1e-9),
+        };
+        *self = Interval::new();
+        record
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use validate::ImageScores;
+
+    fn scores(cd: Option<f64>) -> Scores {
+        let image = ImageScores {
+            psnr: 20.0,
+            ssim: 0.5,
+            mae: 0.1,
+        };
+        Scores {
+            geometry: image,
+            color: None,
+            cd,
+            f1: 0.5,
+            precision: 0.5,
+            recall: 0.5,
+            empty: usize::from(cd.is_none()),
+            mean_points: 100.0,
+            samples: 1,
+        }
+    }
+
+    #[test]
+    fn patience_counts_validations_without_a_better_cd() {
+        let mut state = TrainState::new();
+        state.step = 10;
+        assert!(advance_on_validation(&mut state, &scores(Some(2.0))));
+        state.step = 20;
+        assert!(!advance_on_validation(&mut state, &scores(Some(3.0))));
+        assert!(!advance_on_validation(&mut state, &scores(None)));
+        assert_eq!(state.validations_without_improvement, 2);
+        state.step = 30;
+        assert!(advance_on_validation(&mut state, &scores(Some(1.0))));
+        assert_eq!(state.validations_without_improvement, 0);
+        assert_eq!((state.best_cd, state.best_step), (Some(1.0), Some(30)));
+        // A new stage starts its own patience but a CD worse than the run's best is no new best.
+        state.stage_best_cd = None;
+        assert!(!advance_on_validation(&mut state, &scores(Some(1.5))));
+        assert_eq!(state.stage_best_cd, Some(1.5));
+    }
+
+    #[test]
+    fn a_resumed_log_forgets_what_came_after_its_checkpoint() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut log = RunLog::open(dir.path(), 0).unwrap();
+        log.push(LogRecord::Baseline {
+            scores: scores(Some(1.0)),
+        })
+        .unwrap();
+        for step in [10, 20, 30] {
+            log.push(LogRecord::Validation {
+                step,
+                stage: 0,
+                scores: scores(Some(1.0 / step as f64)),
+            })
+            .unwrap();
+        }
+        let resumed = RunLog::open(dir.path(), 20).unwrap();
+        assert_eq!(resumed.records.len(), 3);
+        let text = std::fs::read_to_string(dir.path().join(LOG_FILE)).unwrap();
+        assert_eq!(text.lines().count(), 3);
+        assert!(!text.contains("\"step\":30"));
+        resumed.draw(dir.path()).unwrap();
+        assert!(dir.path().join(LOSSES_PNG).is_file());
+    }
+}

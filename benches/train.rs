@@ -87,6 +87,7 @@ fn loader_step(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
     let views = example_car_views(256);
     for sub in ["gt", "in"] {
+        std::fs::create_dir_all(dir.path().join(sub)).unwrap();
         write_views(&dir.path().join(sub), &views).unwrap();
     }
     let sample = SampleRef {

@@ -448,6 +448,11 @@ pub struct TrainArgs {
     /// Largest relative colour gain change; 0 = off [default: 0.1].
     #[arg(long)]
     pub color_jitter: Option<f32>,
+    /// torchvision's VGG19 weights (vgg19-dcbd0d2f.pth, or safetensors with its keys): the
+    /// perceptual and style terms then use VGG19 features as the paper does, instead of the
+    /// discriminator's.
+    #[arg(long)]
+    pub vgg19: Option<PathBuf>,
     /// Threads that load and render samples while the network trains.
     #[arg(long, default_value_t = 1)]
     pub workers: usize,

@@ -314,3 +314,28 @@ fn the_reference_bus_trains_without_a_validation_split() {
         );
     assert!(dir.path().join("generator.safetensors").is_file());
 }
+
+#[test]
+fn vgg19_weights_feed_the_feature_losses_and_bad_ones_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let weights = dir.path().join("vgg19.safetensors");
+    let vgg = mvpcc::model::vgg::Vgg19::new(&Device::flex());
+    std::fs::write(&weights, vgg.to_safetensors().unwrap()).unwrap();
+    let run = dir.path().join("run");
+    train(&run, 2, &["--vgg19", s(&weights), "--val-every", "0"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("VGG19 features from"));
+    let saved = std::fs::read_to_string(run.join("train.json")).unwrap();
+    assert!(saved.contains("vgg19.safetensors"));
+
+    let bad = dir.path().join("bad.safetensors");
+    std::fs::write(&bad, b"nothing").unwrap();
+    train(&dir.path().join("other"), 2, &["--vgg19", s(&bad)])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::is_match(r"(?m)^error: .*bad\.safetensors: not usable as VGG19")
+                .unwrap(),
+        );
+}

@@ -66,6 +66,9 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     if let Some(lr) = args.lr {
         s.stage_rates = vec![lr, lr / 10.0, lr / 100.0];
     }
+    if let Some(path) = &args.vgg19 {
+        s.vgg19 = Some(path.clone());
+    }
     if args.no_mirror {
         s.augment.mirror = false;
     }

@@ -3,6 +3,7 @@
 //! weighted sum of its losses.
 
 use super::loss::{discriminator_input, discriminator_loss, generator_losses, LossWeights, Target};
+use super::vgg::Vgg19;
 use super::{ConfigError, Discriminator, Generator, ModelConfig};
 use burn::config::Config;
 use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
@@ -10,11 +11,10 @@ use burn::tensor::activation::sigmoid;
 use burn::tensor::{Bytes, Device, Tensor};
 
 /// Optimizer settings; the defaults are the original's (Adam, β = (0, 0.9), the
-/// discriminator at a tenth of the generator's rate).
+/// discriminator at a tenth of the generator's rate). The generator's rate itself is given to
+/// each [`Gan::step`], since the training stages change it.
 #[derive(Config, Debug, PartialEq)]
 pub struct GanOptimConfig {
-    #[config(default = 1e-4)]
-    pub learning_rate: f64,
     /// Discriminator rate ÷ generator rate (`D2G_LR`).
     #[config(default = 0.1)]
     pub d_to_g_rate: f64,
@@ -33,6 +33,9 @@ pub struct Gan {
     pub discriminator: Discriminator,
     pub config: ModelConfig,
     pub weights: LossWeights,
+    /// Frozen VGG19 features for the perceptual and style terms; the discriminator's features
+    /// when absent.
+    pub vgg: Option<Vgg19>,
     optim: GanOptimConfig,
     g_optim: ModuleOptimizer,
     d_optim: ModuleOptimizer,
@@ -94,6 +97,7 @@ impl Gan {
             discriminator,
             config,
             weights,
+            vgg: None,
             g_optim: adam.init(),
             d_optim: adam.init(),
             optim,
@@ -123,7 +127,13 @@ impl Gan {
                 self.discriminator.forward(real).logits,
                 self.discriminator.forward(fake).logits,
             );
-            let g = generator_losses(&output, target, &self.discriminator, &self.weights);
+            let g = generator_losses(
+                &output,
+                target,
+                &self.discriminator,
+                self.vgg.as_ref(),
+                &self.weights,
+            );
             d_grads.accumulate(
                 &self.discriminator,
                 GradientsParams::from_grads(
@@ -332,6 +342,33 @@ mod tests {
         let x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &Device::flex());
         let out = plain.forward_probed(x, &mut NoProbe);
         assert_eq!(out.images.dims(), [1, 4, 6, 32, 32]);
+    }
+
+    #[test]
+    fn vgg_features_drive_the_perceptual_and_style_terms() {
+        let device = Device::flex().autodiff();
+        device.seed(3);
+        let mut gan = Gan::new(
+            Preset::Tiny.config(),
+            LossWeights::new(),
+            GanOptimConfig::new(),
+            &device,
+        )
+        .unwrap();
+        let (input, target) = sample(&device);
+        let batch = [Batch { input, target }];
+        let (next, plain) = gan.step(&batch, 1e-4);
+        gan = next;
+        gan.vgg = Some(crate::model::vgg::Vgg19::new(&device).no_grad());
+        let vgg_params_before = gan.vgg.as_ref().unwrap().num_params();
+        let (next, with_vgg) = gan.step(&batch, 1e-4);
+        assert!(with_vgg.generator.is_finite());
+        // Other feature maps, other values: VGG's relu1_1 maps have 64 channels at full size.
+        assert!(
+            (with_vgg.perceptual - plain.perceptual).abs() > 1e-3,
+            "{with_vgg:?}"
+        );
+        assert_eq!(next.vgg.unwrap().num_params(), vgg_params_before);
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! and summed; [`generator_losses`] assembles the generator's objective the way the original
 //! does.
 
+use super::vgg::{as_rgb, Vgg19, PERCEPTUAL_LAYERS, STYLE_LAYERS};
 use super::{Discriminator, GeneratorOutput};
 use burn::config::Config;
 use burn::tensor::activation::relu;
@@ -168,6 +169,7 @@ pub fn generator_losses(
     output: &GeneratorOutput,
     target: &Target,
     discriminator: &Discriminator,
+    vgg: Option<&Vgg19>,
     weights: &LossWeights,
 ) -> GeneratorLosses {
     let [b, v, _, s, _] = output.images.dims();
@@ -175,16 +177,42 @@ pub fn generator_losses(
     let l1 = smooth_l1(output.images.clone(), target.images.clone()) / foreground;
     let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
 
+    let probability = burn::tensor::activation::sigmoid(output.occupancy.clone());
     let fake = discriminator.forward(discriminator_input(
         output.images.clone(),
-        burn::tensor::activation::sigmoid(output.occupancy.clone()),
+        probability.clone(),
     ));
-    let real = discriminator
-        .forward(discriminator_input(target.images.clone(), target.occupancy.clone()).detach());
-    let real_features: Vec<Tensor<4>> = real.features.into_iter().map(|f| f.detach()).collect();
     let adversarial = generator_adversarial(weights.adversarial_kind, fake.logits);
-    let perceptual = perceptual(&fake.features, &real_features);
-    let style = style(&fake.features, &real_features);
+    let (perceptual, style) = match vgg {
+        Some(vgg) => {
+            let fake = vgg.forward(as_rgb(output.images.clone() * probability));
+            let real: Vec<Tensor<4>> = vgg
+                .forward(as_rgb(target.images.clone() * target.occupancy.clone()))
+                .into_iter()
+                .map(|f| f.detach())
+                .collect();
+            let pick = |maps: &[Tensor<4>], layers: &[usize]| -> Vec<Tensor<4>> {
+                layers.iter().map(|&k| maps[k].clone()).collect()
+            };
+            (
+                self::perceptual(
+                    &pick(&fake, &PERCEPTUAL_LAYERS),
+                    &pick(&real, &PERCEPTUAL_LAYERS),
+                ),
+                self::style(&pick(&fake, &STYLE_LAYERS), &pick(&real, &STYLE_LAYERS)),
+            )
+        }
+        None => {
+            let real = discriminator.forward(
+                discriminator_input(target.images.clone(), target.occupancy.clone()).detach(),
+            );
+            let real: Vec<Tensor<4>> = real.features.into_iter().map(|f| f.detach()).collect();
+            (
+                self::perceptual(&fake.features, &real),
+                self::style(&fake.features, &real),
+            )
+        }
+    };
 
     let geometry = output
         .images

@@ -12,6 +12,7 @@ pub mod gan;
 mod generator;
 mod layers;
 pub mod loss;
+pub mod vgg;
 pub mod weights;
 
 pub use discriminator::{Discriminator, DiscriminatorOutput};

@@ -53,6 +53,8 @@ pub enum WeightsError {
     ConfigMismatch { expected: String, found: String },
     #[error("its tensors do not fit the config it declares: {0}")]
     Tensors(String),
+    #[error("not usable as VGG19 weights: {0}")]
+    Vgg(String),
     #[error("could not serialize the weights: {0}")]
     Save(String),
 }

@@ -15,6 +15,7 @@ use crate::inpaint::Inpainter;
 use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
 use crate::model::loss::LossWeights;
+use crate::model::vgg::Vgg19;
 use crate::model::ModelConfig;
 use burn::module::Module;
 use checkpoint::{CheckpointError, TrainState, GENERATOR_WEIGHTS};
@@ -61,6 +62,10 @@ pub struct TrainSettings {
     pub augment: AugmentSettings,
     pub loss: LossWeights,
     pub optim: GanOptimConfig,
+    /// torchvision VGG19 weights for the perceptual and style terms (the discriminator's
+    /// features without).
+    #[serde(default)]
+    pub vgg19: Option<PathBuf>,
 }
 
 impl TrainSettings {
@@ -87,6 +92,7 @@ impl TrainSettings {
             },
             loss: LossWeights::new(),
             optim: GanOptimConfig::new(),
+            vgg19: None,
         }
     }
 
@@ -402,6 +408,21 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
     let settings = &job.settings;
     let run = &job.run;
     std::fs::create_dir_all(run).map_err(io_err(run))?;
+    let autodiff = job.device.clone().autodiff();
+    let vgg = match &settings.vgg19 {
+        Some(path) => {
+            let vgg = Vgg19::load(path, &autodiff).map_err(|e| TrainError::Run {
+                path: path.clone(),
+                problem: e.to_string(),
+            })?;
+            monitor.message(&format!(
+                "perceptual and style terms on VGG19 features from {}",
+                path.display()
+            ));
+            Some(vgg)
+        }
+        None => None,
+    };
     let (train_samples, val_samples, what) = samples(&job.data, settings.val_fraction)?;
     monitor.message(&what);
     let cameras = Camera::set(&settings.views, job.model.size).map_err(|e| TrainError::Run {
@@ -415,7 +436,6 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         &cache,
     )?;
 
-    let autodiff = job.device.clone().autodiff();
     let (mut gan, mut state) = match checkpoint::latest(run)? {
         Some(dir) if job.resume => {
             let (gan, state) = checkpoint::load(
@@ -458,6 +478,7 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
             (gan, TrainState::new())
         }
     };
+    gan.vgg = vgg;
     write_json(&run.join(CONFIG_FILE), &job.model)?;
     write_json(&run.join(SETTINGS_FILE), settings)?;
 

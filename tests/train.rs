@@ -202,6 +202,23 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
         .stderr(predicate::str::contains(
             "batch: the run has 2, the options give 3",
         ));
+    // Rendering views larger than the data's leaves holes: said, not refused.
+    base(&dir.path().join("larger"))
+        .args([
+            "--config",
+            "small",
+            "--steps",
+            "1",
+            "--batch",
+            "1",
+            "--val-every",
+            "0",
+        ])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "warning: the data's views are 32² and the model's 128²",
+        ));
     let fresh = dir.path().join("fresh");
     train(&fresh, 2, &[])
         .arg("--resume")

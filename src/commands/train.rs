@@ -165,6 +165,10 @@ impl Monitor for Progress {
         }
     }
 
+    fn warn(&mut self, text: &str) {
+        self.bar.suspend(|| self.log.warn(text));
+    }
+
     fn start(&mut self, first_step: u64, planned: u64) {
         self.bar.set_length(planned);
         self.bar.set_position(first_step);

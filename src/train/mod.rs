@@ -186,6 +186,8 @@ pub struct Job {
 /// What the person running the loop sees; the command layer draws it.
 pub trait Monitor {
     fn message(&mut self, text: &str);
+    /// Shown even to a quiet run.
+    fn warn(&mut self, text: &str);
     /// Called once before the first step with the step to start from and the most steps planned.
     fn start(&mut self, first_step: u64, planned: u64);
     fn stepped(&mut self, step: u64, losses: &StepLosses);
@@ -430,6 +432,14 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         problem: e.to_string(),
     })?;
     let cache = Arc::new(Cache::new(job.cache_bytes));
+    let data_size = cache.get(&train_samples[0].gt, &settings.views)?.size;
+    if data_size < job.model.size {
+        monitor.warn(&format!(
+            "the data's views are {data_size}² and the model's {}²: views rendered larger than \
+             they were made leave holes in the ground truth; prepare the data with --size {}",
+            job.model.size, job.model.size
+        ));
+    }
     let val_items = validate::build(
         &validate::pick(&val_samples, settings.val_samples),
         &cameras,

@@ -155,7 +155,6 @@ struct Progress {
     bar: ProgressBar,
     log: Log,
     stop: Arc<AtomicBool>,
-    json: bool,
 }
 
 impl Monitor for Progress {
@@ -203,7 +202,7 @@ impl Monitor for Progress {
                 scores.f1
             ),
         };
-        if !self.log.quiet() || self.json {
+        if !self.log.quiet() {
             self.bar.suspend(|| eprintln!("{line}"));
         }
     }
@@ -262,12 +261,7 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
         )
         .expect("a valid progress template"),
     );
-    let mut monitor = Progress {
-        bar,
-        log,
-        stop,
-        json: args.json,
-    };
+    let mut monitor = Progress { bar, log, stop };
     let job = Job {
         data: args.data.clone(),
         run: run.clone(),

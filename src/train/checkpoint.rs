@@ -137,7 +137,7 @@ pub fn save(
     std::fs::rename(&tmp, &dir).map_err(io_error(&dir))?;
     let latest = root.join(LATEST);
     atomic_write(&latest, |w| w.write_all(name.as_bytes())).map_err(io_error(&latest))?;
-    prune(&root, keep.max(1))?;
+    prune(run, keep.max(1))?;
     Ok(dir)
 }
 
@@ -161,8 +161,8 @@ pub fn list(run: &Path) -> Result<Vec<PathBuf>, CheckpointError> {
     Ok(dirs)
 }
 
-fn prune(root: &Path, keep: usize) -> Result<(), CheckpointError> {
-    let dirs = list(root.parent().unwrap_or(root))?;
+fn prune(run: &Path, keep: usize) -> Result<(), CheckpointError> {
+    let dirs = list(run)?;
     for old in dirs.iter().take(dirs.len().saturating_sub(keep)) {
         std::fs::remove_dir_all(old).map_err(io_error(old))?;
     }

@@ -251,10 +251,14 @@ impl Augment {
         self.mirror || self.yaw_deg != 0.0
     }
 
-    fn transform(&self, p: [f32; 3]) -> [f32; 3] {
-        let x = if self.mirror { -p[0] } else { p[0] };
+    /// The point transform: mirror, then yaw.
+    fn transform(&self) -> impl Fn([f32; 3]) -> [f32; 3] {
+        let mirror = self.mirror;
         let (sin, cos) = self.yaw_deg.to_radians().sin_cos();
-        [cos * x + sin * p[2], p[1], -sin * x + cos * p[2]]
+        move |p| {
+            let x = if mirror { -p[0] } else { p[0] };
+            [cos * x + sin * p[2], p[1], -sin * x + cos * p[2]]
+        }
     }
 }
 
@@ -302,7 +306,8 @@ pub fn render(src: &Decoded, cameras: &[Camera], augment: &Augment) -> ViewImage
         out
     } else {
         let all: Vec<Pixel> = src.views.iter().flatten().copied().collect();
-        let points: Vec<[f32; 3]> = all.iter().map(|p| augment.transform(p.xyz)).collect();
+        let transform = augment.transform();
+        let points: Vec<[f32; 3]> = all.iter().map(|p| transform(p.xyz)).collect();
         let mut out = project(&points, Some(&colors(&all)), cameras);
         out.has_color = src.has_color;
         out

@@ -2,6 +2,7 @@
 //! here; what they do lives in [`crate::commands`].
 
 use crate::camera::{parse_view_set, DEFAULT_VIEWS};
+use crate::complete::Method;
 use crate::data::CloudPolicy;
 use crate::device::DeviceChoice;
 use crate::frame::UpAxis;
@@ -29,6 +30,9 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Complete a partial scan: the measured points are kept and the missing surface is added
+    /// (flagged `synthetic`), in the input's coordinates. The default model is built in.
+    Complete(Box<CompleteArgs>),
     /// Score predicted clouds against ground truth (Chamfer distances, F-score), or predicted
     /// view images against ground-truth views (PSNR, SSIM, MAE).
     Eval(EvalArgs),
@@ -122,9 +126,15 @@ pub struct EvalArgs {
     /// Ground-truth cloud.
     #[arg(long, requires = "pred")]
     pub gt: Option<PathBuf>,
-    /// Directory of predicted clouds, matched to --gt-dir by file stem.
-    #[arg(long, requires = "gt_dir", conflicts_with = "pred_views")]
+    /// Directory of predicted clouds, matched to --gt-dir by file stem, or to --data's test
+    /// samples as <category>/<model>/partial_<k>.*.
+    #[arg(long, conflicts_with = "pred_views")]
     pub pred_dir: Option<PathBuf>,
+    /// A data directory from `mvpcc prepare`: score --pred-dir's completions of its test
+    /// partials against their ground truth (scanner partials turned back into the object's
+    /// frame), with means per category and per partial protocol.
+    #[arg(long, requires = "pred_dir", conflicts_with = "gt_dir")]
+    pub data: Option<PathBuf>,
     /// Directory of ground-truth clouds.
     #[arg(long, requires = "pred_dir")]
     pub gt_dir: Option<PathBuf>,
@@ -168,6 +178,82 @@ impl std::fmt::Display for ViewList {
 }
 
 #[derive(Debug, Args)]
+pub struct CompleteArgs {
+    /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ).
+    #[arg(required_unless_present = "input_dir", conflicts_with = "input_dir")]
+    pub input: Option<PathBuf>,
+    /// Completed cloud; its extension picks the format (the input's format when it names none).
+    #[arg(required_unless_present = "input_dir")]
+    pub output: Option<PathBuf>,
+    /// Complete every cloud file under this directory (recursively).
+    #[arg(long, requires = "output_dir")]
+    pub input_dir: Option<PathBuf>,
+    /// Where batch results go, at the same relative paths (created if missing).
+    #[arg(long, requires = "input_dir")]
+    pub output_dir: Option<PathBuf>,
+    /// Batch: only files whose name matches this pattern (`*` and `?` wildcards).
+    #[arg(long, requires = "input_dir")]
+    pub include: Option<String>,
+    /// Batch: files completed at once.
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// network, or a baseline: identity (the partial as it is) or mirror (the partial and its
+    /// mirror image across the vehicle's long vertical plane).
+    #[arg(long, value_enum, default_value_t = Method::Network)]
+    pub method: Method,
+    /// Generator weights (a run's generator.safetensors, or its run directory) [default: the
+    /// built-in model].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// Rig cameras of the model's views (those it was trained with).
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Input's up axis [default: z for LAS/LAZ, y otherwise].
+    #[arg(long, value_enum)]
+    pub up: Option<UpAxis>,
+    /// Keep the measured points and add completed points only where they are missing (the
+    /// default).
+    #[arg(long, overrides_with = "no_keep_input")]
+    pub keep_input: bool,
+    /// Output the network's re-projected cloud alone, as the paper does.
+    #[arg(long, overrides_with = "keep_input")]
+    pub no_keep_input: bool,
+    /// Also add the measured points' mirror images across the vehicle's plane of symmetry
+    /// (the default).
+    #[arg(long, overrides_with = "no_symmetry")]
+    pub symmetry: bool,
+    /// Let the network alone complete the far side.
+    #[arg(long, overrides_with = "symmetry")]
+    pub no_symmetry: bool,
+    /// Erosion element side for the inpainted views (pixels); 0 = off.
+    #[arg(long, default_value_t = 3)]
+    pub erode: usize,
+    /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
+    #[arg(long, default_value_t = 5)]
+    pub smooth: usize,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    /// A completed point within this many model pixels of a measured one is not added.
+    #[arg(long, default_value_t = 2.0)]
+    pub merge_pixels: f64,
+    /// Write a PNG of input and output from three viewpoints, completed points tinted.
+    #[arg(long, conflicts_with = "input_dir")]
+    pub preview: Option<PathBuf>,
+    /// Print the time of each stage (the paper's Table 4 breakdown).
+    #[arg(long)]
+    pub timings: bool,
+    /// Print the results as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
 pub struct ProjectArgs {
     /// Input cloud (PLY, PCD, LAS/LAZ, XYZ).
     pub input: PathBuf,
@@ -199,6 +285,9 @@ pub struct ReprojectArgs {
     /// (inpainted) views: it removes most of a raw sparse scan.
     #[arg(long, default_value_t = 3)]
     pub erode: usize,
+    /// Median window side over each view's XYZ before re-projection (pixels); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub smooth: usize,
     /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
     #[arg(long, default_value_t = 1e-4)]
     pub dedup: f64,

@@ -24,6 +24,10 @@ impl ScalarKind {
     }
 }
 
+/// The per-point attribute that marks completed points (1) against measured ones (0); LAS
+/// stores it as the point's synthetic flag.
+pub const SYNTHETIC: &str = "synthetic";
+
 /// A scalar per-point attribute the pipeline does not interpret (intensity, normals, labels…),
 /// carried from input to output. Values are held as f64, which is exact for every kind.
 #[derive(Debug, Clone, PartialEq)]

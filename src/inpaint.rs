@@ -2,9 +2,10 @@
 //! ([`ViewImages`]) and the network ([`Generator`]).
 
 use crate::model::weights::{generator_from_bytes, WeightsError};
-use crate::model::{Channels, Generator, ModelConfig};
+use crate::model::{Channels, Generator, ModelConfig, NoProbe};
 use crate::projection::{ViewImages, CHANNELS};
 use burn::tensor::{Device, Tensor, TensorData};
+use std::time::{Duration, Instant};
 use thiserror::Error;
 
 #[derive(Debug, Error, PartialEq)]
@@ -23,6 +24,16 @@ pub enum InpaintError {
         found: usize,
         expected: usize,
     },
+    #[error("the device failed: {0}")]
+    Device(String),
+}
+
+/// Wall time of the generator's three stages for one batch.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageTimes {
+    pub encoder: Duration,
+    pub fusion: Duration,
+    pub decoder: Duration,
 }
 
 /// Appends one object's network input: per view the channels' planes (geometry shifted into
@@ -107,11 +118,39 @@ impl Inpainter {
     /// the network: it is occupied where the predicted occupancy exceeds one half, and holds
     /// the predicted geometry (and colour, for an XYZRGB model given coloured views).
     pub fn inpaint(&self, batch: &[ViewImages]) -> Result<Vec<ViewImages>, InpaintError> {
+        self.inpaint_timed(batch).map(|(views, _)| views)
+    }
+
+    /// [`Self::inpaint`], timing the encoder, the fusion and the decoder (the device is
+    /// synchronized between them, so each time is its own).
+    pub fn inpaint_timed(
+        &self,
+        batch: &[ViewImages],
+    ) -> Result<(Vec<ViewImages>, StageTimes), InpaintError> {
+        let mut times = StageTimes::default();
         if batch.is_empty() {
-            return Ok(Vec::new());
+            return Ok((Vec::new(), times));
         }
         let input = self.input_tensor(batch)?; // [B, V, C+1, S, S]
-        let output = self.generator.forward(input);
+        let sync = |device: &Device| {
+            device
+                .sync()
+                .map_err(|e| InpaintError::Device(format!("{e:?}")))
+        };
+        sync(&self.device)?;
+        let probe = &mut NoProbe;
+        let start = Instant::now();
+        let features = self.generator.encode(input, probe); // [B·V, 4w, S/4, S/4]
+        sync(&self.device)?;
+        times.encoder = start.elapsed();
+        let start = Instant::now();
+        let joined = self.generator.fuse(features, batch.len(), probe); // [B·V, 8w, S/4, S/4]
+        sync(&self.device)?;
+        times.fusion = start.elapsed();
+        let start = Instant::now();
+        let output = self
+            .generator
+            .decode(joined, batch.len(), self.config.size, probe);
         let images = output
             .images
             .into_data()
@@ -122,7 +161,8 @@ impl Inpainter {
             .into_data()
             .try_into_vec::<f32>()
             .expect("the generator returns f32");
-        Ok(self.output_views(batch, &images, &logits))
+        times.decoder = start.elapsed();
+        Ok((self.output_views(batch, &images, &logits), times))
     }
 
     /// # Shapes

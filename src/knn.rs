@@ -50,6 +50,23 @@ impl KnnIndex {
             });
         out
     }
+
+    /// For each query, the index of its nearest indexed point and the distance to it.
+    pub fn nearest(&self, queries: &[[f64; 3]]) -> Vec<(usize, f64)> {
+        queries
+            .par_iter()
+            .with_min_len(256)
+            .map(|q| {
+                let found = self
+                    .tree
+                    .query(q)
+                    .nearest_n::<SquaredEuclidean<f64>>(NonZero::<usize>::MIN)
+                    .execute();
+                let r = found.into_iter().next().expect("the index is not empty");
+                (r.item as usize, r.distance.sqrt())
+            })
+            .collect()
+    }
 }
 
 /// Most cells a grid may have per point before the k-d tree is used for everything (a cloud
@@ -298,6 +315,15 @@ pub fn knn_distances(points: &[[f64; 3]], queries: &[[f64; 3]], k: usize) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_names_the_closest_point() {
+        let points = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
+        let index = KnnIndex::new(&points);
+        let found = index.nearest(&[[0.9, 0.1, 0.0], [0.1, 1.5, 0.0], [-1.0, 0.0, 0.0]]);
+        assert_eq!(found.iter().map(|f| f.0).collect::<Vec<_>>(), [1, 2, 0]);
+        assert!((found[2].1 - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn grid_search_is_exact_on_surfaces_with_outliers_and_duplicates() {

@@ -7,12 +7,14 @@
 //! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
 //! Training data comes from meshes ([`mesh`], [`synth`]): [`raster`] renders them, [`scan`]
 //! samples ground truth and partial scans, and [`data`] writes the dataset; [`train`] trains the
-//! network on it.
+//! network on it. [`complete`] is the whole pipeline a user runs, with [`symmetry`] finding the
+//! vehicle's plane of symmetry and [`preview`] drawing the result.
 
 pub mod camera;
 pub mod cli;
 pub mod cloud;
 pub mod commands;
+pub mod complete;
 pub mod data;
 pub mod device;
 pub mod filter;
@@ -23,11 +25,13 @@ pub mod knn;
 pub mod mesh;
 pub mod metrics;
 pub mod model;
+pub mod preview;
 pub mod projection;
 pub mod raster;
 pub mod reprojection;
 pub mod scan;
 pub mod shapes;
+pub mod symmetry;
 pub mod synth;
 pub mod train;
 pub mod views;

@@ -15,6 +15,10 @@ pub struct ReprojectOptions {
     pub erode: usize,
     /// Points closer than this (normalized units) to an earlier point are dropped; 0 keeps all.
     pub dedup_tolerance: f64,
+    /// Side of the window whose occupied pixels' median replaces each pixel's XYZ; 0 or 1 keeps
+    /// the pixels as they are. A generator's per-pixel XYZ jitters by several pixels' worth
+    /// around the surface; the median keeps the surface and its edges.
+    pub smooth: usize,
 }
 
 impl Default for ReprojectOptions {
@@ -22,6 +26,7 @@ impl Default for ReprojectOptions {
         ReprojectOptions {
             erode: 3,
             dedup_tolerance: 1e-4,
+            smooth: 0,
         }
     }
 }
@@ -140,6 +145,31 @@ pub fn dedup_indices(points: &[[f64; 3]], tolerance: f64) -> Vec<usize> {
     kept
 }
 
+/// Component-wise median XYZ of the occupied pixels in the `k`×`k` window around `at`.
+fn median_xyz(px: &[f32], occupied: &[bool], size: usize, at: usize, k: usize) -> [f64; 3] {
+    let plane = size * size;
+    let half = (k / 2) as isize;
+    let (row, col) = ((at / size) as isize, (at % size) as isize);
+    let mut window: [Vec<f32>; 3] = Default::default();
+    for r in (row - half)..=(row + half) {
+        for c in (col - half)..=(col + half) {
+            if r < 0 || c < 0 || r >= size as isize || c >= size as isize {
+                continue;
+            }
+            let i = r as usize * size + c as usize;
+            if occupied[i] {
+                for (ch, values) in window.iter_mut().enumerate() {
+                    values.push(px[ch * plane + i]);
+                }
+            }
+        }
+    }
+    window.map(|mut values| {
+        let mid = values.len() / 2;
+        *values.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
+    })
+}
+
 /// Occupied pixels (after erosion) of every view, as one de-duplicated cloud in normalized
 /// coordinates, with colour when the views carry it.
 pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
@@ -153,8 +183,13 @@ pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
             let px = views.view_pixels(v);
             let mut positions = Vec::new();
             let mut colors = Vec::new();
+            let occupied = views.view_occupancy(v);
             for at in (0..plane).filter(|&at| mask[at]) {
-                positions.push([0, 1, 2].map(|c| px[c * plane + at] as f64));
+                positions.push(if options.smooth > 1 {
+                    median_xyz(px, occupied, size, at, options.smooth)
+                } else {
+                    [0, 1, 2].map(|c| px[c * plane + at] as f64)
+                });
                 if views.has_color {
                     colors.push(
                         [3, 4, 5]
@@ -268,6 +303,7 @@ mod tests {
             ReprojectOptions {
                 erode: 0,
                 dedup_tolerance: 1e-6,
+                smooth: 0,
             },
         );
         // Every visible point once, however many views saw it.
@@ -286,5 +322,44 @@ mod tests {
             .map(|p| p.map(f64::to_bits))
             .collect();
         assert_eq!(unique.len(), cloud.len());
+    }
+
+    #[test]
+    fn smoothing_removes_a_spike_and_keeps_a_plane() {
+        // One view of a tilted plane z = 0.1·x with one pixel pushed off it.
+        let size = 16;
+        let plane = size * size;
+        let mut views = ViewImages::empty(vec![5], size, false);
+        for at in 0..plane {
+            let (x, y) = ((at % size) as f32 / 32.0, (at / size) as f32 / 32.0);
+            views.pixels[at] = x;
+            views.pixels[plane + at] = y;
+            views.pixels[2 * plane + at] = 0.1 * x;
+            views.occupancy[at] = true;
+        }
+        let spike = 8 * size + 8;
+        views.pixels[2 * plane + spike] = 0.4;
+        let options = ReprojectOptions {
+            erode: 0,
+            dedup_tolerance: 0.0,
+            smooth: 0,
+        };
+        let off_plane = |cloud: &PointCloud| {
+            cloud
+                .positions
+                .iter()
+                .map(|p| (p[2] - 0.1 * p[0]).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(off_plane(&reproject(&views, options)) > 0.3);
+        let smoothed = reproject(
+            &views,
+            ReprojectOptions {
+                smooth: 3,
+                ..options
+            },
+        );
+        assert_eq!(smoothed.len(), plane);
+        assert!(off_plane(&smoothed) < 1e-6, "{}", off_plane(&smoothed));
     }
 }

@@ -1,10 +1,12 @@
 use super::{load, Log};
 use crate::cli::{EvalArgs, Metric, Normalize};
 use crate::cloud::PointCloud;
+use crate::data::{Layout, Manifest, TEST};
 use crate::frame::{Frame, UpAxis};
 use crate::io::Format;
 use crate::metrics::{compare_clouds, compare_images, CloudMetrics, ImageMetrics};
 use crate::projection::CHANNELS;
+use crate::scan::PartialSpec;
 use crate::views::{find_views, read_views};
 use anyhow::{bail, Context};
 use serde_json::{json, Map, Value};
@@ -154,6 +156,146 @@ fn table_row(name: &str, m: &CloudMetrics, metrics: &[Metric]) -> String {
     r
 }
 
+/// One test partial of a data directory and its completion.
+struct DataSample {
+    category: String,
+    protocol: &'static str,
+    name: String,
+    pred: PathBuf,
+    gt: PathBuf,
+    spec: PartialSpec,
+}
+
+/// The completion of `<category>/<model>/partial_<k>` in `pred_dir`, whatever its extension.
+fn find_prediction(dir: &Path, k: usize) -> Option<PathBuf> {
+    let stem = format!("partial_{k}");
+    std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| {
+            p.file_stem().and_then(|s| s.to_str()) == Some(&stem) && Format::from_path(p).is_ok()
+        })
+}
+
+fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyhow::Result<()> {
+    let manifest_path = data.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest_path).with_context(|| {
+        format!(
+            "{}: not a data directory from `mvpcc prepare`",
+            manifest_path.display()
+        )
+    })?;
+    let manifest: Manifest = serde_json::from_str(&text)
+        .with_context(|| format!("{}: unreadable manifest", manifest_path.display()))?;
+    let layout = Layout {
+        root: data.to_path_buf(),
+    };
+    let mut samples = Vec::new();
+    let mut missing = Vec::new();
+    for model in manifest.models.iter().filter(|m| m.split == TEST) {
+        let gt = layout
+            .clouds(&model.split, &model.category, &model.name)
+            .join("gt.ply");
+        let dir = pred_dir.join(&model.category).join(&model.name);
+        for sample in &model.samples {
+            let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
+            match find_prediction(&dir, sample.k) {
+                Some(pred) => samples.push(DataSample {
+                    category: model.category.clone(),
+                    protocol: match sample.spec {
+                        PartialSpec::Cameras { .. } => "cameras",
+                        PartialSpec::Scanner { .. } => "scanner",
+                    },
+                    name,
+                    pred,
+                    gt: gt.clone(),
+                    spec: sample.spec.clone(),
+                }),
+                None => missing.push(name),
+            }
+        }
+    }
+    if !missing.is_empty() {
+        bail!(
+            "{}: no completion for {} of {} test partials (first: {})",
+            pred_dir.display(),
+            missing.len(),
+            missing.len() + samples.len(),
+            missing[0]
+        );
+    }
+    if samples.is_empty() {
+        bail!("{}: the data has no test partials", data.display());
+    }
+    let bar = super::progress(samples.len(), "eval", log);
+    let results = samples
+        .iter()
+        .map(|s| {
+            let pred = load(&s.pred, None, log)?;
+            let gt = load(&s.gt, None, log)?;
+            let turned: Vec<[f64; 3]> = pred
+                .positions
+                .iter()
+                .map(|p| s.spec.to_object_frame(p.map(|c| c as f32)).map(f64::from))
+                .collect();
+            bar.inc(1);
+            Ok(compare_clouds(&turned, &gt.positions, &args.tau))
+        })
+        .collect::<anyhow::Result<Vec<CloudMetrics>>>()?;
+    bar.finish_and_clear();
+
+    let mut groups: BTreeMap<String, Vec<CloudMetrics>> = BTreeMap::new();
+    for (s, m) in samples.iter().zip(&results) {
+        for key in [
+            format!("category {}", s.category),
+            format!("protocol {}", s.protocol),
+        ] {
+            groups.entry(key).or_default().push(m.clone());
+        }
+    }
+    let mut table = vec![table_header(&args.metrics, &args.tau)];
+    let mut out = Map::new();
+    out.insert("data".into(), json!(data.display().to_string()));
+    out.insert("pred_dir".into(), json!(pred_dir.display().to_string()));
+    out.insert("thresholds".into(), json!(args.tau));
+    let mut group_json = Map::new();
+    for (key, ms) in groups.iter().chain([(&"all".to_string(), &results)]) {
+        let mean = mean_metrics(ms);
+        table.push(table_row(
+            &format!("{key} ({})", ms.len()),
+            &mean,
+            &args.metrics,
+        ));
+        let mut o = cloud_json(&mean, &args.metrics);
+        o.insert("samples".into(), json!(ms.len()));
+        group_json.insert(key.clone(), Value::Object(o));
+    }
+    out.insert("groups".into(), Value::Object(group_json));
+    out.insert(
+        "samples".into(),
+        Value::Array(
+            samples
+                .iter()
+                .zip(&results)
+                .map(|(s, m)| {
+                    let mut o = cloud_json(m, &args.metrics);
+                    o.insert("name".into(), json!(s.name));
+                    o.insert("protocol".into(), json!(s.protocol));
+                    Value::Object(o)
+                })
+                .collect(),
+        ),
+    );
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&Value::Object(out))?);
+    } else {
+        for line in table {
+            println!("{line}");
+        }
+    }
+    Ok(())
+}
+
 fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec<ImageMetrics>)> {
     let cameras = find_views(gt_dir)?;
     let gt = read_views(gt_dir, Some(&cameras))?;
@@ -192,6 +334,12 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
         .metrics
         .iter()
         .any(|m| matches!(m, Metric::Psnr | Metric::Ssim | Metric::Mae));
+    if let (Some(data), Some(pred_dir)) = (&args.data, &args.pred_dir) {
+        return eval_dataset(data, pred_dir, &args, log);
+    }
+    if args.pred_dir.is_some() && args.gt_dir.is_none() {
+        bail!("--pred-dir needs --gt-dir or --data");
+    }
     let have_clouds = args.pred.is_some() || args.pred_dir.is_some();
     if geometry && !have_clouds {
         bail!("cd and f1 compare clouds: pass --pred and --gt, or --pred-dir and --gt-dir");

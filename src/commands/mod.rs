@@ -1,5 +1,6 @@
 //! One module per subcommand; errors become anyhow here and one `error: …` line in main.
 
+mod complete;
 mod eval;
 mod filter;
 mod prepare;
@@ -18,6 +19,7 @@ use std::path::Path;
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     let log = Log { quiet: cli.quiet };
     match cli.command {
+        Command::Complete(args) => complete::run(args, log),
         Command::Eval(args) => eval::run(args, log),
         Command::Project(args) => project::run(args, log),
         Command::Reproject(args) => reproject::run(args, log),

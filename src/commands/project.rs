@@ -22,7 +22,7 @@ pub(super) struct ViewsInfo {
 pub(super) const INFO_FILE: &str = "frame.json";
 
 /// MLS formats are z-up; the dataset's own formats are y-up.
-fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
+pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
     match format.or_else(|| Format::from_path(input).ok()) {
         Some(Format::Las | Format::Laz) => UpAxis::Z,
         _ => UpAxis::Y,

@@ -26,6 +26,7 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
         ReprojectOptions {
             erode: args.erode,
             dedup_tolerance: args.dedup,
+            smooth: args.smooth,
         },
     );
     if merged.is_empty() {

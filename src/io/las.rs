@@ -1,8 +1,9 @@
 //! LAS and LAZ through the `las` crate: scaled integer coordinates (scale and offset kept for
-//! writing back), RGB (16-bit scaled to 8), intensity and classification.
+//! writing back), RGB (16-bit scaled to 8), intensity, classification and the synthetic flag
+//! (the [`SYNTHETIC`] attribute).
 
 use super::Problem;
-use crate::cloud::{Attribute, PointCloud, Quantization, ScalarKind};
+use crate::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};
@@ -41,6 +42,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     let mut colors16 = Vec::with_capacity(if has_color { n } else { 0 });
     let mut intensity = Vec::with_capacity(n);
     let mut classification = Vec::with_capacity(n);
+    let mut synthetic = Vec::with_capacity(n);
     for p in data.points() {
         let p = p.map_err(las_problem)?;
         positions.push([p.x, p.y, p.z]);
@@ -49,6 +51,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         }
         intensity.push(p.intensity as f64);
         classification.push(u8::from(p.classification) as f64);
+        synthetic.push(if p.is_synthetic { 1.0 } else { 0.0 });
     }
     // Most writers scale 8-bit colour to 16 bits; some store 8-bit values as they are.
     let sixteen_bit = colors16.iter().flatten().any(|&v| v > 255);
@@ -66,21 +69,29 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
             })
             .collect()
     });
+    let mut attributes = vec![
+        Attribute {
+            name: "intensity".into(),
+            kind: ScalarKind::U16,
+            values: intensity,
+        },
+        Attribute {
+            name: "classification".into(),
+            kind: ScalarKind::U8,
+            values: classification,
+        },
+    ];
+    if synthetic.contains(&1.0) {
+        attributes.push(Attribute {
+            name: SYNTHETIC.into(),
+            kind: ScalarKind::U8,
+            values: synthetic,
+        });
+    }
     Ok(PointCloud {
         positions,
         colors,
-        attributes: vec![
-            Attribute {
-                name: "intensity".into(),
-                kind: ScalarKind::U16,
-                values: intensity,
-            },
-            Attribute {
-                name: "classification".into(),
-                kind: ScalarKind::U8,
-                values: classification,
-            },
-        ],
+        attributes,
         quantization: Some(quantization),
     })
 }
@@ -139,6 +150,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
         let intensity = cloud.attribute("intensity");
         let classification = cloud.attribute("classification");
+        let synthetic = cloud.attribute(SYNTHETIC);
         for i in 0..cloud.len() {
             let [x, y, z] = cloud.positions[i];
             let point = Point {
@@ -149,6 +161,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
                 classification: classification
                     .and_then(|a| Classification::new(a.values[i] as u8).ok())
                     .unwrap_or(Classification::CreatedNeverClassified),
+                is_synthetic: synthetic.is_some_and(|a| a.values[i] != 0.0),
                 color: cloud.colors.as_ref().map(|c| Color {
                     red: c[i][0] as u16 * 257,
                     green: c[i][1] as u16 * 257,

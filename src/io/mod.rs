@@ -340,11 +340,28 @@ mod tests {
                 back.attribute("classification"),
                 cloud.attribute("classification")
             );
+            assert_eq!(back.attribute(crate::cloud::SYNTHETIC), None, "no flag set");
             // Written again, the file keeps the scale and offset it was read with.
             let again = round_trip(ext, Encoding::Binary, &back);
             assert_eq!(again.quantization, back.quantization);
             assert_eq!(again.positions, back.positions);
         }
+    }
+
+    #[test]
+    fn las_carries_the_synthetic_flag() {
+        let mut cloud = colored_cloud(true);
+        let flags: Vec<f64> = (0..cloud.len()).map(|i| (i % 2) as f64).collect();
+        cloud.attributes.push(crate::cloud::Attribute {
+            name: crate::cloud::SYNTHETIC.into(),
+            kind: crate::cloud::ScalarKind::U8,
+            values: flags.clone(),
+        });
+        let back = round_trip("las", Encoding::Binary, &cloud);
+        assert_eq!(
+            back.attribute(crate::cloud::SYNTHETIC).unwrap().values,
+            flags
+        );
     }
 
     #[test]

@@ -107,6 +107,17 @@ impl Generator {
 
     /// [`Self::forward`] with every layer run through `probe`.
     pub fn forward_probed<P: Probe>(&self, input: Tensor<5>, probe: &mut P) -> GeneratorOutput {
+        let [batch, _, _, size, _] = input.dims();
+        let features = self.encode(input, probe);
+        let joined = self.fuse(features, batch, probe);
+        self.decode(joined, batch, size, probe)
+    }
+
+    /// The shared per-view encoder: stem, two stride-2 downsamplings, dilated residual blocks.
+    ///
+    /// # Shapes
+    /// `input`: `[batch, views, channels + 1, S, S]` → `[batch · views, 4w, S/4, S/4]`
+    pub fn encode<P: Probe>(&self, input: Tensor<5>, probe: &mut P) -> Tensor<4> {
         let [batch, views, planes, size, _] = input.dims();
         assert_eq!(
             views, self.views,
@@ -125,9 +136,18 @@ impl Generator {
         for block in &self.middle {
             x = block.forward(x, probe);
         }
-        let [_, feat, fh, fw] = x.dims(); // [B·V, 4w, S/4, S/4]
+        x
+    }
 
-        let all = x.clone().reshape([batch, views * feat, fh, fw]); // [B, V·4w, S/4, S/4]
+    /// Feature fusion: one convolution over all views' features, its result beside each view's
+    /// own.
+    ///
+    /// # Shapes
+    /// `features`: `[batch · views, 4w, S/4, S/4]` → `[batch · views, 8w, S/4, S/4]`
+    pub fn fuse<P: Probe>(&self, features: Tensor<4>, batch: usize, probe: &mut P) -> Tensor<4> {
+        let views = self.views;
+        let [_, feat, fh, fw] = features.dims(); // [B·V, 4w, S/4, S/4]
+        let all = features.clone().reshape([batch, views * feat, fh, fw]); // [B, V·4w, S/4, S/4]
         let fused = self.fusion.forward(all, probe);
         let fused = probe.layer(LayerKind::Elementwise, || {
             relu(fused)
@@ -135,8 +155,23 @@ impl Generator {
                 .expand([batch, views, feat, fh, fw])
                 .reshape([batch * views, feat, fh, fw])
         }); // [B·V, 4w, S/4, S/4]
-        let mut x = probe.layer(LayerKind::Elementwise, || Tensor::cat(vec![x, fused], 1)); // [B·V, 8w, S/4, S/4]
+        probe.layer(LayerKind::Elementwise, || {
+            Tensor::cat(vec![features, fused], 1)
+        }) // [B·V, 8w, S/4, S/4]
+    }
 
+    /// The shared per-view decoder.
+    ///
+    /// # Shapes
+    /// `x`: `[batch · views, 8w, S/4, S/4]` → images `[batch, views, channels, S, S]`,
+    /// occupancy `[batch, views, 1, S, S]`
+    pub fn decode<P: Probe>(
+        &self,
+        mut x: Tensor<4>,
+        batch: usize,
+        size: usize,
+        probe: &mut P,
+    ) -> GeneratorOutput {
         for up in &self.up {
             x = up.forward(x, probe);
             x = probe.layer(LayerKind::Elementwise, || relu(x));
@@ -152,7 +187,7 @@ impl Generator {
                 .div_scalar(2.0);
             Tensor::cat(vec![images, x.narrow(1, c, 1)], 1)
         });
-        let x = x.reshape([batch, views, c + 1, size, size]); // [B, V, C+1, S, S]
+        let x = x.reshape([batch, self.views, c + 1, size, size]); // [B, V, C+1, S, S]
         GeneratorOutput {
             images: x.clone().narrow(2, 0, c),
             occupancy: x.narrow(2, c, 1),

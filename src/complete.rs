@@ -1,0 +1,536 @@
+//! The completion pipeline: a partial cloud in, the completed cloud in the same coordinates out.
+//!
+//! read → frame → project → inpaint → re-project (eroded) → outlier filter → merge with the
+//! measured points → back to the input's frame. The measured points are kept exactly; completed
+//! points are added only where no measured point lies within `merge_pixels` model pixels, and
+//! carry a `synthetic` flag so a user can tell them apart.
+//!
+//! Two baselines run through the same code: `identity` (the partial as it is) and `mirror` (the
+//! partial united with its mirror image across the vehicle's long vertical plane).
+
+use crate::camera::{Camera, CameraError};
+use crate::cloud::{Attribute, PointCloud, ScalarKind};
+use crate::filter::{inliers, SorParams};
+use crate::frame::{Frame, FrameError, UpAxis};
+use crate::inpaint::{InpaintError, Inpainter};
+use crate::knn::KnnIndex;
+use crate::projection::project;
+use crate::reprojection::{reproject, ReprojectOptions};
+use crate::symmetry::{find_plane, mirror, Plane};
+use nalgebra::{Matrix3, SymmetricEigen};
+use serde::Serialize;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Fewer measured points than this are refused: there is nothing to complete from.
+pub const MIN_POINTS: usize = 50;
+/// Below this many points the result is unreliable and a warning says so.
+const SPARSE_POINTS: usize = 500;
+/// The built-in generator (see README, *The default model*, for how it was trained).
+pub const DEFAULT_MODEL: &[u8] = include_bytes!("../assets/model.safetensors");
+
+pub use crate::cloud::SYNTHETIC;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// The inpainting network.
+    Network,
+    /// The partial unchanged (a baseline).
+    Identity,
+    /// The partial and its mirror image across the vehicle's long vertical plane (a baseline).
+    Mirror,
+}
+
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub method: Method,
+    pub up: UpAxis,
+    /// Rig cameras the model's views come from.
+    pub views: Vec<usize>,
+    /// Erosion element side for the inpainted views.
+    pub erode: usize,
+    /// Median window side over the inpainted views' XYZ.
+    pub smooth: usize,
+    pub sor: SorParams,
+    /// Keep the measured points and add completed points where they are missing; otherwise
+    /// the output is the network's re-projected cloud alone (the paper's output).
+    pub keep_input: bool,
+    /// A completed point within this many model pixels of a measured point is not added.
+    pub merge_pixels: f64,
+    /// Also add the measured points' mirror images (network method; the mirror method always
+    /// does).
+    pub symmetry: bool,
+}
+
+#[derive(Debug, Error)]
+pub enum CompleteError {
+    #[error("only {0} points; completion needs at least {MIN_POINTS}")]
+    TooFewPoints(usize),
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    #[error(transparent)]
+    Inpaint(#[from] InpaintError),
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    #[error("the model takes {model} views, --views names {given}")]
+    Views { model: usize, given: usize },
+    #[error("the network method needs a model")]
+    NoModel,
+}
+
+/// Wall time of each stage (the paper's Table 4 rows; reading and writing are the command's).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timings {
+    pub projection: Duration,
+    pub encoder: Duration,
+    pub fusion: Duration,
+    pub decoder: Duration,
+    pub reprojection: Duration,
+    pub filter: Duration,
+}
+
+/// A completed cloud and what happened on the way.
+#[derive(Debug, Clone)]
+pub struct Completion {
+    /// In the input's coordinates: the measured points first (unless `keep_input` was off),
+    /// then the added ones, with the [`SYNTHETIC`] attribute.
+    pub cloud: PointCloud,
+    /// The same points in the network's unit box (for previews).
+    pub normalized: Vec<[f64; 3]>,
+    /// The measured points in the network's unit box.
+    pub input_normalized: Vec<[f64; 3]>,
+    pub frame: Frame,
+    pub input_points: usize,
+    /// Completed points in the output, of which `mirrored` are mirror images.
+    pub added: usize,
+    pub mirrored: usize,
+    /// Re-projected network points removed by the outlier filter.
+    pub filtered_out: usize,
+    pub plane: Option<Plane>,
+    /// Why the input looks unlike what the model was trained on.
+    pub warnings: Vec<String>,
+    pub timings: Timings,
+}
+
+/// Completes `input`. `inpainter` is needed by the network method only.
+pub fn complete(
+    input: &PointCloud,
+    inpainter: Option<&Inpainter>,
+    options: &Options,
+) -> Result<Completion, CompleteError> {
+    if input.len() < MIN_POINTS {
+        return Err(CompleteError::TooFewPoints(input.len()));
+    }
+    let fitted = Frame::fit(input, options.up)?;
+    let fitted_points: Vec<[f64; 3]> = input
+        .positions
+        .iter()
+        .map(|&p| fitted.to_normalized(p))
+        .collect();
+    let plane = find_plane(&fitted_points);
+    let frame = symmetric_frame(&fitted, &fitted_points, plane);
+    let measured: Vec<[f64; 3]> = input
+        .positions
+        .iter()
+        .map(|&p| frame.to_normalized(p))
+        .collect();
+    let plane = plane.map(|p| Plane {
+        offset: frame.to_normalized(fitted.to_input([p.offset, 0.0, 0.0]))[0],
+        tolerance: p.tolerance * fitted.extent / frame.extent,
+        ..p
+    });
+    let mut warnings = distribution_warnings(&measured);
+    let mut timings = Timings::default();
+
+    // Mirror images first: they come from measured points, so they are trusted over the network.
+    let mirror_plane = match options.method {
+        Method::Identity => None,
+        Method::Mirror => plane,
+        Method::Network => plane.filter(|_| options.symmetry),
+    };
+    if options.method == Method::Mirror && plane.is_none() {
+        warnings.push("no symmetry plane found; nothing is mirrored".to_string());
+    }
+    let pitch = match inpainter {
+        Some(i) => 1.0 / i.config().size as f64,
+        None => 1.0 / 64.0,
+    };
+    let tolerance = options.merge_pixels * pitch;
+    let measured_index = KnnIndex::new(&measured);
+    let mut added: Vec<Added> = Vec::new();
+    if let Some(plane) = mirror_plane {
+        let images: Vec<[f64; 3]> = measured.iter().map(|&p| mirror(p, plane.offset)).collect();
+        for (i, (image, (_, d))) in images
+            .iter()
+            .zip(measured_index.nearest(&images))
+            .enumerate()
+        {
+            if d > plane.tolerance {
+                added.push(Added {
+                    position: *image,
+                    color: None,
+                    source: i,
+                });
+            }
+        }
+    }
+    let mut mirrored = added.len();
+
+    let mut filtered_out = 0;
+    let mut network_cloud: Option<Vec<[f64; 3]>> = None;
+    if options.method == Method::Network {
+        let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
+        let config = inpainter.config();
+        if config.views != options.views.len() {
+            return Err(CompleteError::Views {
+                model: config.views,
+                given: options.views.len(),
+            });
+        }
+        let start = Instant::now();
+        let cameras = Camera::set(&options.views, config.size)?;
+        let points: Vec<[f32; 3]> = measured.iter().map(|p| p.map(|c| c as f32)).collect();
+        let views = project(&points, input.colors.as_deref(), &cameras);
+        timings.projection = start.elapsed();
+
+        let (mut out, stages) = inpainter.inpaint_timed(&[views])?;
+        timings.encoder = stages.encoder;
+        timings.fusion = stages.fusion;
+        timings.decoder = stages.decoder;
+
+        let start = Instant::now();
+        let inpainted = out.pop().expect("one object in, one out");
+        let predicted = reproject(
+            &inpainted,
+            ReprojectOptions {
+                erode: options.erode,
+                smooth: options.smooth,
+                ..ReprojectOptions::default()
+            },
+        );
+        timings.reprojection = start.elapsed();
+
+        let start = Instant::now();
+        let keep = inliers(&predicted.positions, options.sor);
+        filtered_out = keep.iter().filter(|&&k| !k).count();
+        let predicted = predicted.filter(&keep);
+        timings.filter = start.elapsed();
+
+        let start = Instant::now();
+        if options.keep_input {
+            // Covered: measured points and the mirror images already added.
+            let mut covered = measured.clone();
+            covered.extend(added.iter().map(|a| a.position));
+            let covered_index = KnnIndex::new(&covered);
+            let near = covered_index.nearest(&predicted.positions);
+            let measured_near = measured_index.nearest(&predicted.positions);
+            for (i, ((_, d), (source, _))) in near.into_iter().zip(measured_near).enumerate() {
+                if d > tolerance {
+                    added.push(Added {
+                        position: predicted.positions[i],
+                        color: predicted.colors.as_ref().map(|c| c[i]),
+                        source,
+                    });
+                }
+            }
+        } else {
+            network_cloud = Some(predicted.positions.clone());
+            mirrored = 0;
+            let sources = measured_index.nearest(&predicted.positions);
+            added = predicted
+                .positions
+                .iter()
+                .zip(sources)
+                .enumerate()
+                .map(|(i, (&position, (source, _)))| Added {
+                    position,
+                    color: predicted.colors.as_ref().map(|c| c[i]),
+                    source,
+                })
+                .collect();
+        }
+        timings.reprojection += start.elapsed();
+    }
+
+    let keep_input = network_cloud.is_none();
+    let cloud = assemble(input, &frame, &added, keep_input);
+    let mut normalized = if keep_input {
+        measured.clone()
+    } else {
+        Vec::new()
+    };
+    normalized.extend(added.iter().map(|a| a.position));
+    Ok(Completion {
+        cloud,
+        normalized,
+        input_normalized: measured,
+        frame,
+        input_points: input.len(),
+        added: added.len(),
+        mirrored,
+        filtered_out,
+        plane,
+        warnings,
+        timings,
+    })
+}
+
+/// A completed point in the network's frame; `source` is the measured point it takes its
+/// attributes (and, without a colour of its own, its colour) from.
+struct Added {
+    position: [f64; 3],
+    color: Option<[u8; 3]>,
+    source: usize,
+}
+
+/// The frame the network expects: the training objects' boxes are centred on their symmetry
+/// plane and hold the whole object, so the box is fitted to the measured points together with
+/// their mirror images. Without a plane, the measured points' own box.
+fn symmetric_frame(fitted: &Frame, points: &[[f64; 3]], plane: Option<Plane>) -> Frame {
+    let Some(plane) = plane else {
+        return fitted.clone();
+    };
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for &p in points {
+        for q in [p, mirror(p, plane.offset)] {
+            for i in 0..3 {
+                lo[i] = lo[i].min(q[i]);
+                hi[i] = hi[i].max(q[i]);
+            }
+        }
+    }
+    let center = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
+    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    Frame {
+        center: fitted.to_input(center),
+        extent: fitted.extent * extent,
+        rotation: fitted.rotation,
+    }
+}
+
+/// The output cloud in the input's coordinates: the measured points exactly as read (when
+/// kept), then the added points, with [`SYNTHETIC`] marking them.
+fn assemble(input: &PointCloud, frame: &Frame, added: &[Added], keep_input: bool) -> PointCloud {
+    let sources: Vec<usize> = added.iter().map(|a| a.source).collect();
+    let mut extra = input.select(&sources);
+    for (p, a) in extra.positions.iter_mut().zip(added) {
+        *p = frame.to_input(a.position);
+    }
+    if let Some(colors) = extra.colors.as_mut() {
+        for (c, a) in colors.iter_mut().zip(added) {
+            if let Some(own) = a.color {
+                *c = own;
+            }
+        }
+    }
+    let flag_of_input = |i: usize| {
+        input
+            .attribute(SYNTHETIC)
+            .map_or(0.0, |attribute| attribute.values[i])
+    };
+    let mut out = if keep_input {
+        let mut out = input.clone();
+        out.positions.extend(extra.positions);
+        if let (Some(c), Some(e)) = (out.colors.as_mut(), extra.colors) {
+            c.extend(e);
+        }
+        for (a, e) in out.attributes.iter_mut().zip(extra.attributes) {
+            a.values.extend(e.values);
+        }
+        out
+    } else {
+        extra
+    };
+    let mut flags: Vec<f64> = if keep_input {
+        (0..input.len()).map(flag_of_input).collect()
+    } else {
+        Vec::new()
+    };
+    flags.extend(std::iter::repeat_n(1.0, added.len()));
+    out.attributes.retain(|a| a.name != SYNTHETIC);
+    out.attributes.push(Attribute {
+        name: SYNTHETIC.to_string(),
+        kind: ScalarKind::U8,
+        values: flags,
+    });
+    out
+}
+
+/// Warnings for inputs far from the street vehicles the model learned: too few points, a thin
+/// (pole- or wire-like) shape, or points in one plane (a single scan line, a wall).
+fn distribution_warnings(points: &[[f64; 3]]) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if points.len() < SPARSE_POINTS {
+        warnings.push(format!(
+            "only {} points: completion from so few is unreliable",
+            points.len()
+        ));
+    }
+    let n = points.len() as f64;
+    let mean = points.iter().fold([0.0; 3], |m, p| {
+        [m[0] + p[0] / n, m[1] + p[1] / n, m[2] + p[2] / n]
+    });
+    let mut cov = Matrix3::<f64>::zeros();
+    for p in points {
+        let d = nalgebra::Vector3::new(p[0] - mean[0], p[1] - mean[1], p[2] - mean[2]);
+        cov += d * d.transpose() / n;
+    }
+    let mut spread: Vec<f64> = SymmetricEigen::new(cov)
+        .eigenvalues
+        .iter()
+        .map(|v| v.max(0.0).sqrt())
+        .collect();
+    spread.sort_by(f64::total_cmp);
+    // Spreads are standard deviations in the unit box: a car's are about 0.1, 0.15 and 0.3.
+    if spread[1] < 0.02 {
+        warnings.push(
+            "the points form a thin line (a pole, a wire, a single scan line?), not a vehicle"
+                .to_string(),
+        );
+    } else if spread[0] < 0.003 {
+        warnings.push(
+            "the points lie in one plane (a wall, one side only?): the model expects a 3D vehicle"
+                .to_string(),
+        );
+    }
+    warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::weights::generator_to_bytes;
+    use crate::model::Preset;
+    use crate::shapes::{example_car, scanned_side};
+    use burn::tensor::Device;
+
+    fn options(method: Method) -> Options {
+        Options {
+            method,
+            up: UpAxis::Y,
+            views: crate::camera::DEFAULT_VIEWS.to_vec(),
+            erode: 3,
+            smooth: 5,
+            sor: SorParams::default(),
+            keep_input: true,
+            merge_pixels: 2.0,
+            symmetry: false,
+        }
+    }
+
+    /// The example car's scanned side, moved to georeferenced coordinates.
+    fn partial() -> PointCloud {
+        let mut cloud = scanned_side(&example_car());
+        for p in &mut cloud.positions {
+            p[0] += 650_000.0;
+            p[2] += 5_270_000.0;
+        }
+        cloud
+    }
+
+    fn tiny_inpainter() -> Inpainter {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        Inpainter::from_bytes(&generator_to_bytes(&g, &config).unwrap(), device).unwrap()
+    }
+
+    fn flags(cloud: &PointCloud) -> &[f64] {
+        &cloud.attribute(SYNTHETIC).unwrap().values
+    }
+
+    #[test]
+    fn identity_keeps_the_input_and_flags_nothing() {
+        let input = partial();
+        let done = complete(&input, None, &options(Method::Identity)).unwrap();
+        assert_eq!(done.cloud.positions, input.positions);
+        assert_eq!(done.added, 0);
+        assert!(flags(&done.cloud).iter().all(|&f| f == 0.0));
+    }
+
+    #[test]
+    fn mirror_adds_the_far_side_in_the_input_frame() {
+        let input = partial();
+        let done = complete(&input, None, &options(Method::Mirror)).unwrap();
+        assert_eq!(&done.cloud.positions[..input.len()], &input.positions[..]);
+        // The mirror adds the far flank, as many points as the near flank (x > 0.7 m) has.
+        let near = input
+            .positions
+            .iter()
+            .filter(|p| p[0] - 650_000.0 > 0.7)
+            .count();
+        assert!(
+            done.added.abs_diff(near) < near / 4,
+            "{} added for a near flank of {near}",
+            done.added
+        );
+        let f = flags(&done.cloud);
+        assert!(f[..input.len()].iter().all(|&v| v == 0.0));
+        assert!(f[input.len()..].iter().all(|&v| v == 1.0));
+        // The car spans x ∈ [−0.9, 0.9] m; the scan sees x > −0.6 m only; its mirror images
+        // reach the far flank, in the input's georeferenced coordinates.
+        let min_x = done.cloud.positions[input.len()..]
+            .iter()
+            .map(|p| p[0] - 650_000.0)
+            .fold(f64::MAX, f64::min);
+        assert!((min_x + 0.9).abs() < 0.05, "far flank at {min_x}");
+        assert_eq!(done.cloud.colors.as_ref().unwrap().len(), done.cloud.len());
+    }
+
+    #[test]
+    fn network_output_lands_in_the_input_frame_with_input_points_exact() {
+        let input = partial();
+        let inpainter = tiny_inpainter();
+        let opts = options(Method::Network);
+        let done = complete(&input, Some(&inpainter), &opts).unwrap();
+        assert_eq!(&done.cloud.positions[..input.len()], &input.positions[..]);
+        assert_eq!(done.cloud.len(), input.len() + done.added);
+        assert_eq!(done.normalized.len(), done.cloud.len());
+        for (p, q) in done
+            .cloud
+            .positions
+            .iter()
+            .zip(&done.normalized)
+            .skip(input.len())
+        {
+            let back = done.frame.to_input(*q);
+            for i in 0..3 {
+                assert!((p[i] - back[i]).abs() < 1e-6);
+            }
+        }
+        let opts = Options {
+            keep_input: false,
+            ..opts
+        };
+        let alone = complete(&input, Some(&inpainter), &opts).unwrap();
+        assert!(flags(&alone.cloud).iter().all(|&v| v == 1.0));
+    }
+
+    #[test]
+    fn refusals_and_warnings() {
+        let few = PointCloud::from_positions((0..20).map(|i| [i as f64, 0.0, 0.0]).collect());
+        assert!(matches!(
+            complete(&few, None, &options(Method::Identity)),
+            Err(CompleteError::TooFewPoints(20))
+        ));
+        let line = PointCloud::from_positions(
+            (0..300)
+                .map(|i| [i as f64 * 0.01, (i % 3) as f64 * 1e-4, 0.0])
+                .collect(),
+        );
+        let done = complete(&line, None, &options(Method::Identity)).unwrap();
+        assert_eq!(done.warnings.len(), 2, "{:?}", done.warnings);
+        assert!(done.warnings[1].contains("thin line"));
+        let car = complete(&partial(), None, &options(Method::Identity)).unwrap();
+        assert!(car.warnings.is_empty(), "{:?}", car.warnings);
+        let inpainter = tiny_inpainter();
+        let mut three = options(Method::Network);
+        three.views = vec![5, 6, 7];
+        assert!(matches!(
+            complete(&partial(), Some(&inpainter), &three),
+            Err(CompleteError::Views { model: 4, given: 3 })
+        ));
+    }
+}

@@ -1,0 +1,312 @@
+//! `mvpcc complete` end to end on a tiny untrained model (and on the built-in one): the output
+//! lands in the input's frame, keeps every input point exactly and flags what it added; batch
+//! mode survives bad files and says so.
+
+use assert_cmd::Command;
+use burn::tensor::Device;
+use mvpcc::cloud::{PointCloud, SYNTHETIC};
+use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use mvpcc::model::weights::generator_to_bytes;
+use mvpcc::model::Preset;
+use mvpcc::shapes;
+use predicates::prelude::*;
+use std::path::{Path, PathBuf};
+use tempfile::TempDir;
+
+fn mvpcc() -> Command {
+    Command::cargo_bin("mvpcc").unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// An untrained tiny generator, written where `--model` can read it.
+fn tiny_model(dir: &TempDir) -> PathBuf {
+    let config = Preset::Tiny.config();
+    let generator = config.init_generator(&Device::flex()).unwrap();
+    let path = dir.path().join("tiny.safetensors");
+    std::fs::write(&path, generator_to_bytes(&generator, &config).unwrap()).unwrap();
+    path
+}
+
+/// A scanner's view of one side of a car, in georeferenced metres (UTM-sized coordinates).
+fn scan(seed: u64) -> PointCloud {
+    let mut cloud = shapes::scanned_side(&shapes::car(8000, seed));
+    for p in &mut cloud.positions {
+        p[0] += 650_123.25;
+        p[1] += 112.5;
+        p[2] += 5_270_456.75;
+    }
+    cloud
+}
+
+fn write(dir: &TempDir, name: &str, cloud: &PointCloud) -> PathBuf {
+    let path = dir.path().join(name);
+    write_cloud(&path, cloud, None, Encoding::Binary).unwrap();
+    path
+}
+
+fn flags(cloud: &PointCloud) -> Vec<f64> {
+    cloud
+        .attribute(SYNTHETIC)
+        .expect("completed clouds carry the flag")
+        .values
+        .clone()
+}
+
+/// Per axis, how far `points` reach beyond the box of `reference`.
+fn overshoot(points: &[[f64; 3]], reference: &[[f64; 3]]) -> f64 {
+    let mut worst: f64 = 0.0;
+    for axis in 0..3 {
+        let lo = reference.iter().map(|p| p[axis]).fold(f64::MAX, f64::min);
+        let hi = reference.iter().map(|p| p[axis]).fold(f64::MIN, f64::max);
+        for p in points {
+            worst = worst.max(lo - p[axis]).max(p[axis] - hi);
+        }
+    }
+    worst
+}
+
+#[test]
+fn completes_in_the_input_frame_keeping_every_input_point() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let input_cloud = scan(3);
+    let input = write(&dir, "scan.ply", &input_cloud);
+    let (output, preview) = (dir.path().join("done.ply"), dir.path().join("done.png"));
+    let assert = mvpcc()
+        .args(["complete", s(&input), s(&output), "--model", s(&model)])
+        .args(["--preview", s(&preview), "--timings", "--json"])
+        .assert()
+        .success();
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+
+    let out = read_cloud(&output, None).unwrap().cloud;
+    let n = input_cloud.len();
+    assert_eq!(report["input_points"], n);
+    assert_eq!(report["output_points"], out.len());
+    assert_eq!(report["added"], out.len() - n);
+    assert!(out.len() > n, "the mirror images alone add the far flank");
+    assert_eq!(&out.positions[..n], &input_cloud.positions[..]);
+    assert_eq!(
+        out.colors.as_ref().unwrap()[..n],
+        input_cloud.colors.unwrap()[..]
+    );
+    let f = flags(&out);
+    assert!(f[..n].iter().all(|&v| v == 0.0));
+    assert!(f[n..].iter().all(|&v| v == 1.0));
+    // The frame is restored: the car is 1.8 m wide (the scan sees 1.5 m of it), and completed
+    // points stay within a car's size of the scan, not near the origin of the unit box.
+    let reach = overshoot(&out.positions[n..], &out.positions[..n]);
+    assert!(reach < 1.0, "added points reach {reach} m beyond the scan");
+    let far_flank = out.positions[n..]
+        .iter()
+        .map(|p| p[0] - 650_123.25)
+        .fold(f64::MAX, f64::min);
+    assert!((far_flank + 0.9).abs() < 0.1, "far flank at {far_flank} m");
+
+    let png = image::open(&preview).unwrap();
+    assert!(png.width() > 300 && png.height() > 300);
+    for stage in [
+        "projection",
+        "encoder",
+        "fusion",
+        "decoder",
+        "filter",
+        "total",
+    ] {
+        assert!(report["seconds"][stage].as_f64().unwrap() >= 0.0, "{stage}");
+    }
+}
+
+#[test]
+fn timings_table_and_las_synthetic_flag() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let input_cloud = scan(4);
+    let input = write(&dir, "scan.ply", &input_cloud);
+    let output = dir.path().join("done.las");
+    mvpcc()
+        .args([
+            "complete",
+            s(&input),
+            s(&output),
+            "--model",
+            s(&model),
+            "--timings",
+        ])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("encoder").and(predicate::str::contains("total")));
+    let out = read_cloud(&output, None).unwrap().cloud;
+    let n = input_cloud.len();
+    let f = flags(&out);
+    assert!(f[..n].iter().all(|&v| v == 0.0) && f[n..].iter().all(|&v| v == 1.0));
+    assert!(out.len() > n);
+}
+
+#[test]
+fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
+    let dir = TempDir::new().unwrap();
+    let input_cloud = scan(5);
+    let input = write(&dir, "scan.pcd", &input_cloud);
+    let identity = dir.path().join("identity.pcd");
+    mvpcc()
+        .args(["complete", s(&input), s(&identity), "--method", "identity"])
+        .assert()
+        .success();
+    let same = read_cloud(&identity, None).unwrap().cloud;
+    assert_eq!(same.positions, input_cloud.positions);
+    assert!(flags(&same).iter().all(|&v| v == 0.0));
+
+    let mirror = dir.path().join("mirror.pcd");
+    mvpcc()
+        .args(["complete", s(&input), s(&mirror), "--method", "mirror"])
+        .assert()
+        .success();
+    assert!(read_cloud(&mirror, None).unwrap().cloud.len() > input_cloud.len());
+
+    let model = tiny_model(&dir);
+    let alone = dir.path().join("alone.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&alone), "--model", s(&model)])
+        .arg("--no-keep-input")
+        .assert()
+        .success();
+    let alone = read_cloud(&alone, None).unwrap().cloud;
+    assert!(flags(&alone).iter().all(|&v| v == 1.0));
+    assert!(overshoot(&alone.positions, &input_cloud.positions) < 1.5);
+}
+
+#[test]
+fn the_built_in_model_completes_out_of_the_box() {
+    let dir = TempDir::new().unwrap();
+    let input_cloud = scan(6);
+    let input = write(&dir, "scan.ply", &input_cloud);
+    let output = dir.path().join("done.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&output)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("completed"));
+    let out = read_cloud(&output, None).unwrap().cloud;
+    assert!(out.len() > input_cloud.len());
+    assert_eq!(
+        &out.positions[..input_cloud.len()],
+        &input_cloud.positions[..]
+    );
+}
+
+#[test]
+fn batch_completes_the_good_files_and_reports_the_bad_ones() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let inputs = dir.path().join("in");
+    std::fs::create_dir_all(inputs.join("street")).unwrap();
+    write_cloud(&inputs.join("a.ply"), &scan(7), None, Encoding::Binary).unwrap();
+    write_cloud(
+        &inputs.join("street/b.pcd"),
+        &scan(8),
+        None,
+        Encoding::Ascii,
+    )
+    .unwrap();
+    std::fs::write(inputs.join("broken.ply"), b"ply\nformat nonsense\n").unwrap();
+    let few = PointCloud {
+        positions: (0..20).map(|i| [i as f64, 0.0, 1.0]).collect(),
+        ..Default::default()
+    };
+    write_cloud(&inputs.join("few.ply"), &few, None, Encoding::Binary).unwrap();
+    let outputs = dir.path().join("out");
+    let assert = mvpcc()
+        .args([
+            "complete",
+            "--input-dir",
+            s(&inputs),
+            "--output-dir",
+            s(&outputs),
+        ])
+        .args(["--model", s(&model), "--jobs", "2", "--json"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("2 of 4 files failed"))
+        .stderr(predicate::str::contains("broken.ply"))
+        .stderr(predicate::str::contains("few.ply").and(predicate::str::contains("20 points")))
+        .stderr(predicate::str::contains("panicked").not());
+    let reports: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    assert_eq!(reports.as_array().unwrap().len(), 4);
+    assert!(
+        read_cloud(&outputs.join("a.ply"), None)
+            .unwrap()
+            .cloud
+            .len()
+            > 1000
+    );
+    assert!(
+        read_cloud(&outputs.join("street/b.pcd"), None)
+            .unwrap()
+            .cloud
+            .len()
+            > 1000
+    );
+    assert!(!outputs.join("broken.ply").exists());
+    assert!(!outputs.join("few.ply").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(&outputs)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(leftovers.len(), 2, "no temp files left: {leftovers:?}");
+}
+
+#[test]
+fn odd_inputs_warn_and_tiny_ones_fail_cleanly() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    // A single scan line: 300 points along a 5 m pole.
+    let line = PointCloud {
+        positions: (0..300).map(|i| [0.0, i as f64 / 60.0, 0.0]).collect(),
+        ..Default::default()
+    };
+    let input = write(&dir, "pole.ply", &line);
+    let output = dir.path().join("pole_done.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&output), "--model", s(&model)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("warning").and(predicate::str::contains("pole.ply")));
+    assert!(output.exists());
+
+    let few = PointCloud {
+        positions: (0..20).map(|i| [i as f64, 0.0, 1.0]).collect(),
+        ..Default::default()
+    };
+    let input = write(&dir, "few.ply", &few);
+    let output = dir.path().join("few_done.ply");
+    let assert = mvpcc()
+        .args(["complete", s(&input), s(&output), "--model", s(&model)])
+        .assert()
+        .failure();
+    let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("error: ") && stderr.contains("few.ply"),
+        "{stderr}"
+    );
+    assert!(!output.exists());
+
+    let input = write(&dir, "scan.ply", &scan(9));
+    let output = dir.path().join("x.ply");
+    mvpcc()
+        .args([
+            "complete",
+            s(&input),
+            s(&output),
+            "--model",
+            s(&dir.path().join("none")),
+        ])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("none"));
+    assert!(!output.exists());
+}

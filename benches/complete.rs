@@ -18,10 +18,10 @@ fn end_to_end(c: &mut Criterion) {
         up: UpAxis::Y,
         views: mvpcc::camera::DEFAULT_VIEWS.to_vec(),
         erode: 3,
-        smooth: 5,
+        smooth: 0,
         sor: SorParams::default(),
         keep_input: true,
-        merge_pixels: 2.0,
+        merge_pixels: 8.0,
         symmetry: true,
     };
     let dir = tempfile::tempdir().unwrap();

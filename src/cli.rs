@@ -231,12 +231,12 @@ pub struct CompleteArgs {
     #[arg(long, default_value_t = 3)]
     pub erode: usize,
     /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 0)]
     pub smooth: usize,
     #[command(flatten)]
     pub sor: SorOptions,
     /// A completed point within this many model pixels of a measured one is not added.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 8.0)]
     pub merge_pixels: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "input_dir")]

@@ -82,6 +82,8 @@ pub enum CompleteError {
 /// Wall time of each stage (the paper's Table 4 rows; reading and writing are the command's).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Timings {
+    /// Frame, symmetry plane and mirror images.
+    pub symmetry: Duration,
     pub projection: Duration,
     pub encoder: Duration,
     pub fusion: Duration,
@@ -122,6 +124,7 @@ pub fn complete(
     if input.len() < MIN_POINTS {
         return Err(CompleteError::TooFewPoints(input.len()));
     }
+    let symmetry_start = Instant::now();
     let fitted = Frame::fit(input, options.up)?;
     let fitted_points: Vec<[f64; 3]> = input
         .positions
@@ -176,6 +179,7 @@ pub fn complete(
         }
     }
     let mut mirrored = added.len();
+    timings.symmetry = symmetry_start.elapsed();
 
     let mut filtered_out = 0;
     let mut network_cloud: Option<Vec<[f64; 3]>> = None;

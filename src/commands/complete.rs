@@ -146,6 +146,7 @@ fn complete_file(
     let t = &done.timings;
     let rows = [
         ("read", read),
+        ("symmetry", t.symmetry),
         ("projection", t.projection),
         ("encoder", t.encoder),
         ("fusion", t.fusion),

@@ -286,14 +286,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
                 .collect(),
         ),
     );
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&Value::Object(out))?);
-    } else {
-        for line in table {
-            println!("{line}");
-        }
-    }
-    Ok(())
+    print_results(args.json, out, &table)
 }
 
 fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec<ImageMetrics>)> {
@@ -466,7 +459,16 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
         ));
     }
 
-    if args.json {
+    print_results(args.json, out, &table)
+}
+
+/// The results on stdout: the JSON object with `--json`, the table otherwise.
+fn print_results(
+    json: bool,
+    out: serde_json::Map<String, Value>,
+    table: &[String],
+) -> anyhow::Result<()> {
+    if json {
         println!("{}", serde_json::to_string_pretty(&Value::Object(out))?);
     } else {
         for line in table {

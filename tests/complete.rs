@@ -96,10 +96,11 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
     let f = flags(&out);
     assert!(f[..n].iter().all(|&v| v == 0.0));
     assert!(f[n..].iter().all(|&v| v == 1.0));
-    // The frame is restored: the car is 1.8 m wide (the scan sees 1.5 m of it), and completed
-    // points stay within a car's size of the scan, not near the origin of the unit box.
+    // The frame is restored: the untrained model puts points anywhere in the model's box, a
+    // cube one car length (4.4 m) on a side around the car, so within 2.2 m of the scan's box,
+    // not near the origin 650 km away.
     let reach = overshoot(&out.positions[n..], &out.positions[..n]);
-    assert!(reach < 1.0, "added points reach {reach} m beyond the scan");
+    assert!(reach < 2.2, "added points reach {reach} m beyond the scan");
     let far_flank = out.positions[n..]
         .iter()
         .map(|p| p[0] - 650_123.25)
@@ -171,12 +172,13 @@ fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
     let alone = dir.path().join("alone.ply");
     mvpcc()
         .args(["complete", s(&input), s(&alone), "--model", s(&model)])
-        .arg("--no-keep-input")
+        // An untrained model's occupancy is noise that erosion would remove entirely.
+        .args(["--no-keep-input", "--erode", "0"])
         .assert()
         .success();
     let alone = read_cloud(&alone, None).unwrap().cloud;
     assert!(flags(&alone).iter().all(|&v| v == 1.0));
-    assert!(overshoot(&alone.positions, &input_cloud.positions) < 1.5);
+    assert!(overshoot(&alone.positions, &input_cloud.positions) < 2.2);
 }
 
 #[test]

@@ -24,7 +24,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
         (Some(input), Some(output), _, _) => {
             let report = complete_file(input, output, &args, inpainter.as_ref(), log)?;
             if args.json {
-                println!("{}", serde_json::to_string_pretty(&report.json)?);
+                println!("{}", serde_json::to_string_pretty(&report)?);
             }
             Ok(())
         }
@@ -91,22 +91,18 @@ fn output_format(args: &CompleteArgs, input: &Path, output: &Path) -> anyhow::Re
         .map_err(|e| anyhow!("{}: {e}", output.display()))
 }
 
-/// What one file's completion reports.
-struct Report {
-    json: Value,
-}
-
 fn seconds(d: Duration) -> f64 {
     d.as_secs_f64()
 }
 
+/// Completes one file; the JSON report of what happened.
 fn complete_file(
     input: &Path,
     output: &Path,
     args: &CompleteArgs,
     inpainter: Option<&Inpainter>,
     log: Log,
-) -> anyhow::Result<Report> {
+) -> anyhow::Result<Value> {
     let total = Instant::now();
     check_output(output, &[input])?;
     let format = output_format(args, input, output)?;
@@ -165,8 +161,7 @@ fn complete_file(
         .iter()
         .map(|(name, d)| (name.replace('-', ""), json!(seconds(*d))))
         .collect();
-    Ok(Report {
-        json: json!({
+    Ok(json!({
             "input": input,
             "output": output,
             "method": args.method,
@@ -178,8 +173,7 @@ fn complete_file(
             "symmetry_plane": done.plane.map(|p| json!({"x": p.offset, "support": p.support})),
             "warnings": done.warnings,
             "seconds": timings,
-        }),
-    })
+    }))
 }
 
 fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::Result<()> {
@@ -280,7 +274,7 @@ fn batch(
         .with_context(|| format!("{}: cannot create", output_dir.display()))?;
     let bar = progress(files.len(), "completing", log);
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, anyhow::Result<Report>)>> = Mutex::new(Vec::new());
+    let results: Mutex<Vec<(usize, anyhow::Result<Value>)>> = Mutex::new(Vec::new());
     // Each file's own messages would tear the bar; they are summarized at the end instead.
     let quiet_file = Log { quiet: true };
     let jobs = args.jobs.clamp(1, files.len());
@@ -314,14 +308,14 @@ fn batch(
     for (i, result) in results {
         match result {
             Ok(report) => {
-                for w in report.json["warnings"].as_array().into_iter().flatten() {
+                for w in report["warnings"].as_array().into_iter().flatten() {
                     log.warn(format!(
                         "{}: {}",
                         input_dir.join(&files[i]).display(),
                         w.as_str().unwrap_or_default()
                     ));
                 }
-                reports.push(report.json);
+                reports.push(report);
             }
             Err(e) => {
                 let message = format!("{e:#}").replace('\n', " ");

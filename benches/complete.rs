@@ -1,29 +1,19 @@
-//! `complete` end to end on a ~35K-point car scan (the README's speed table): read, complete with
-//! the built-in model, write; and the parts users can switch off.
+//! `complete` end to end on a ~35K-point car scan (the README's speed table): read, orient and
+//! complete with the built-in models, write; and the parts users can switch off.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::complete::{complete, Method, Options, DEFAULT_MODEL};
-use mvpcc::filter::SorParams;
 use mvpcc::frame::UpAxis;
 use mvpcc::inpaint::Inpainter;
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use mvpcc::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
 use std::time::Duration;
 
 mod common;
 
 fn end_to_end(c: &mut Criterion) {
     let inpainter = Inpainter::from_bytes(DEFAULT_MODEL, burn::tensor::Device::flex()).unwrap();
-    let options = |method| Options {
-        method,
-        up: UpAxis::Y,
-        views: mvpcc::camera::DEFAULT_VIEWS.to_vec(),
-        erode: 3,
-        smooth: 0,
-        sor: SorParams::default(),
-        keep_input: true,
-        merge_pixels: 8.0,
-        symmetry: true,
-    };
+    let orienter = Orienter::from_bytes(DEFAULT_ORIENTER, burn::tensor::Device::flex()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("scan.ply");
     let output = dir.path().join("done.ply");
@@ -36,10 +26,16 @@ fn end_to_end(c: &mut Criterion) {
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
         for method in [Method::Network, Method::Mirror] {
-            let options = options(method);
-            group.bench_function(format!("{method:?}: read, complete, write"), |b| {
+            group.bench_function(format!("{method:?}: read, orient, complete, write"), |b| {
                 b.iter(|| {
                     let cloud = read_cloud(&input, None).unwrap().cloud;
+                    let heading =
+                        orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
+                    let options = Options {
+                        method,
+                        heading,
+                        ..Options::default()
+                    };
                     let done = complete(&cloud, Some(&inpainter), &options).unwrap();
                     write_cloud(&output, &done.cloud, None, Encoding::Binary).unwrap();
                 })

@@ -9,6 +9,7 @@ use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
 use crate::mesh::SignedAxis;
 use crate::model::{Channels, ModelConfig, Padding, Preset};
+use crate::orient::OrientMode;
 use crate::scan::PartialKinds;
 use crate::synth::Category;
 use clap::{Args, Parser, Subcommand, ValueEnum};
@@ -52,6 +53,9 @@ pub enum Command {
     /// Train the inpainting GAN on a "shapenet-views" directory (from `mvpcc prepare` or the
     /// original MVPCC data).
     Train(TrainArgs),
+    /// Train the orientation network (the paper's STN) on the partial samples of a
+    /// "shapenet-views" directory turned by random yaws.
+    TrainOrient(TrainOrientArgs),
 }
 
 /// How an input file is read.
@@ -213,6 +217,19 @@ pub struct CompleteArgs {
     /// Input's up axis [default: z for LAS/LAZ, y otherwise].
     #[arg(long, value_enum)]
     pub up: Option<UpAxis>,
+    /// Which way the vehicle faces: auto (the best measured estimator, see README), geometric
+    /// (footprint rectangle + height heuristic), learned (the orientation network), combined
+    /// (rectangle axis, network's front), none (keep the input's axes), or the heading in
+    /// degrees (the front's direction, counter-clockwise from +x seen from above).
+    #[arg(long, default_value = "auto", allow_negative_numbers = true)]
+    pub orient: OrientMode,
+    /// Orientation network weights (train-orient's orienter.safetensors) [default: built in].
+    #[arg(long)]
+    pub orienter: Option<PathBuf>,
+    /// Remove ground points (a plane fit under the object), isolated points and points of
+    /// other objects before completing; the counts are reported.
+    #[arg(long)]
+    pub clean: bool,
     /// Keep the measured points and add completed points only where they are missing (the
     /// default).
     #[arg(long, overrides_with = "no_keep_input")]
@@ -554,4 +571,34 @@ pub struct TrainArgs {
     /// Print the run's summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Options of `mvpcc train-orient`.
+#[derive(Debug, Args)]
+pub struct TrainOrientArgs {
+    /// Data: a "shapenet-views" directory (`mvpcc prepare`); its partial samples are used.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Where orienter.safetensors, config.json, train-orient.json and log.jsonl go [default:
+    /// runs/orient-<name of the data directory>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long, default_value_t = 4000)]
+    pub steps: u64,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Points the network reads from a cloud.
+    #[arg(long, default_value_t = 1024)]
+    pub points: usize,
+    /// Steps between validations.
+    #[arg(long, default_value_t = 250)]
+    pub val_every: u64,
+    #[arg(long, default_value_t = 256)]
+    pub val_samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
 }

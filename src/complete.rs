@@ -42,10 +42,13 @@ pub enum Method {
     Mirror,
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Options {
     pub method: Method,
     pub up: UpAxis,
+    /// Which way the input's front faces (see [`crate::frame`]); `None` keeps the input's
+    /// axes, turning only its longer horizontal side onto the length.
+    pub heading: Option<f64>,
     /// Rig cameras the model's views come from.
     pub views: Vec<usize>,
     /// Erosion element side for the inpainted views.
@@ -61,6 +64,24 @@ pub struct Options {
     /// Also add the measured points' mirror images (network method; the mirror method always
     /// does).
     pub symmetry: bool,
+}
+
+/// What `mvpcc complete IN OUT` does for a y-up input without options.
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            method: Method::Network,
+            up: UpAxis::Y,
+            heading: None,
+            views: crate::camera::DEFAULT_VIEWS.to_vec(),
+            erode: 3,
+            smooth: 0,
+            sor: SorParams::default(),
+            keep_input: true,
+            merge_pixels: 8.0,
+            symmetry: true,
+        }
+    }
 }
 
 #[derive(Debug, Error)]
@@ -125,7 +146,10 @@ pub fn complete(
         return Err(CompleteError::TooFewPoints(input.len()));
     }
     let symmetry_start = Instant::now();
-    let fitted = Frame::fit(input, options.up)?;
+    let fitted = match options.heading {
+        Some(heading) => Frame::fit_heading(input, options.up, heading)?,
+        None => Frame::fit(input, options.up)?,
+    };
     let fitted_points: Vec<[f64; 3]> = input
         .positions
         .iter()
@@ -413,14 +437,10 @@ mod tests {
     fn options(method: Method) -> Options {
         Options {
             method,
-            up: UpAxis::Y,
-            views: crate::camera::DEFAULT_VIEWS.to_vec(),
-            erode: 3,
             smooth: 5,
-            sor: SorParams::default(),
-            keep_input: true,
             merge_pixels: 2.0,
             symmetry: false,
+            ..Options::default()
         }
     }
 

@@ -1,9 +1,14 @@
 //! The map between a cloud's own coordinates and the unit box the network works in.
 //!
 //! Convention of the original dataset: bounding box centred at the origin, longest side 1,
-//! +y up, the object's length along z. The map is a signed axis permutation (a proper rotation,
+//! +y up, the object's length along z, its front towards −z. The map is a proper rotation (a
+//! signed axis permutation, then a turn about the vertical when the object's heading is known,
 //! so nothing is mirrored), a translation and a uniform scale, all in f64, so its inverse
 //! restores georeferenced coordinates to ~1e-16 relative.
+//!
+//! A heading is the direction the object's front faces, in degrees counter-clockwise from the
+//! input's +x axis seen from above (for a y-up input, from above means looking down −y). The
+//! canonical pose has heading 90° in y-up coordinates.
 
 use crate::cloud::PointCloud;
 use serde::{Deserialize, Serialize};
@@ -25,7 +30,7 @@ pub enum FrameError {
     ZeroExtent,
 }
 
-/// `normalized = R · (p − center) / extent`, with `R` a signed permutation matrix.
+/// `normalized = R · (p − center) / extent`, with `R` a rotation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Frame {
     pub center: [f64; 3],
@@ -57,9 +62,24 @@ fn apply_transposed(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| m[0][i] * v[0] + m[1][i] * v[1] + m[2][i] * v[2])
 }
 
+/// The rotation that stands a cloud with up axis `up` upright (+y up), keeping x.
+pub fn upright(up: UpAxis) -> [[f64; 3]; 3] {
+    match up {
+        UpAxis::Y => IDENTITY,
+        UpAxis::Z => Z_UP_TO_Y_UP,
+    }
+}
+
+/// Turn about +y (y-up coordinates) that brings an upright object of `heading` degrees into
+/// the canonical pose, front towards −z.
+pub fn yaw_to_canonical(heading: f64) -> [[f64; 3]; 3] {
+    let (s, c) = (90.0 - heading).to_radians().sin_cos();
+    [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
+}
+
 impl Frame {
     /// Fits the frame to a cloud whose up axis is `up`; the longer horizontal extent is turned
-    /// onto z.
+    /// onto z (which end is the front is left as it comes).
     pub fn fit(cloud: &PointCloud, up: UpAxis) -> Result<Frame, FrameError> {
         let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
         let size = bounds.extent();
@@ -67,10 +87,7 @@ impl Frame {
         if extent.is_nan() || extent <= 0.0 {
             return Err(FrameError::ZeroExtent);
         }
-        let upright = match up {
-            UpAxis::Y => IDENTITY,
-            UpAxis::Z => Z_UP_TO_Y_UP,
-        };
+        let upright = upright(up);
         // Extents of the upright box along its x and z (a permutation only moves the sides).
         let upright_size = apply(&upright, size).map(f64::abs);
         let rotation = if upright_size[0] > upright_size[2] {
@@ -80,6 +97,34 @@ impl Frame {
         };
         Ok(Frame {
             center: bounds.center(),
+            extent,
+            rotation,
+        })
+    }
+
+    /// Fits the frame to a cloud whose up axis is `up` and whose front faces `heading`
+    /// degrees: the cloud is turned into the canonical pose, then boxed.
+    pub fn fit_heading(cloud: &PointCloud, up: UpAxis, heading: f64) -> Result<Frame, FrameError> {
+        let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
+        let rotation = mat_mul(&yaw_to_canonical(heading), &upright(up));
+        // Turned about the axis-aligned centre, so georeferenced offsets cost no precision.
+        let origin = bounds.center();
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for p in &cloud.positions {
+            let q = apply(&rotation, [0, 1, 2].map(|i| p[i] - origin[i]));
+            for i in 0..3 {
+                lo[i] = lo[i].min(q[i]);
+                hi[i] = hi[i].max(q[i]);
+            }
+        }
+        let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+        if extent.is_nan() || extent <= 0.0 {
+            return Err(FrameError::ZeroExtent);
+        }
+        let offset = apply_transposed(&rotation, [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0));
+        Ok(Frame {
+            center: [0, 1, 2].map(|i| origin[i] + offset[i]),
             extent,
             rotation,
         })
@@ -195,12 +240,68 @@ mod tests {
     }
 
     #[test]
+    fn heading_turns_the_front_to_minus_z_and_round_trips() {
+        // The box is 4 m long on x; a front facing +x (heading 0°) must land at −z.
+        let mut cloud = georeferenced_box();
+        let front = [650_127.25, 5_270_457.5, 113.5];
+        cloud.positions.push(front);
+        let frame = Frame::fit_heading(&cloud, UpAxis::Z, 0.0).unwrap();
+        assert!((det(&frame.rotation) - 1.0).abs() < 1e-12);
+        let f = frame.to_normalized(front);
+        assert!((f[2] + 0.5).abs() < 1e-12 && f[0].abs() < 1e-12, "{f:?}");
+        let b = frame.normalize(&cloud).bounds().unwrap();
+        let e = b.extent();
+        assert!(
+            (e[2] - 1.0).abs() < 1e-12 && (e[0] - 0.5).abs() < 1e-12,
+            "{e:?}"
+        );
+        // The same box turned by 37° about the vertical, fitted with its heading.
+        let (s, c) = 37f64.to_radians().sin_cos();
+        let turned = PointCloud::from_positions(
+            cloud
+                .positions
+                .iter()
+                .map(|p| {
+                    let (x, y) = (p[0] - 650_000.0, p[1] - 5_270_000.0);
+                    [650_000.0 + c * x - s * y, 5_270_000.0 + s * x + c * y, p[2]]
+                })
+                .collect(),
+        );
+        let frame = Frame::fit_heading(&turned, UpAxis::Z, 37.0).unwrap();
+        let e = frame.normalize(&turned).bounds().unwrap().extent();
+        assert!(
+            (e[2] - 1.0).abs() < 1e-9 && (e[0] - 0.5).abs() < 1e-9,
+            "{e:?}"
+        );
+        let back = frame.denormalize(&frame.normalize(&turned));
+        for (a, b) in turned.positions.iter().zip(&back.positions) {
+            for i in 0..3 {
+                assert!((a[i] - b[i]).abs() < 1e-6, "{a:?} vs {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn canonical_heading_is_the_identity_for_y_up() {
+        let r = yaw_to_canonical(90.0);
+        for (i, row) in r.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert!((v - IDENTITY[i][j]).abs() < 1e-15);
+            }
+        }
+    }
+
+    #[test]
     fn degenerate_clouds_are_refused() {
         let same = PointCloud::from_positions(vec![[1.0, 2.0, 3.0]; 5]);
         assert_eq!(Frame::fit(&same, UpAxis::Y), Err(FrameError::ZeroExtent));
         assert_eq!(
             Frame::fit(&PointCloud::default(), UpAxis::Y),
             Err(FrameError::Empty)
+        );
+        assert_eq!(
+            Frame::fit_heading(&same, UpAxis::Z, 10.0),
+            Err(FrameError::ZeroExtent)
         );
     }
 }

@@ -7,10 +7,12 @@
 //! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
 //! Training data comes from meshes ([`mesh`], [`synth`]): [`raster`] renders them, [`scan`]
 //! samples ground truth and partial scans, and [`data`] writes the dataset; [`train`] trains the
-//! network on it. [`complete`] is the whole pipeline a user runs, with [`symmetry`] finding the
-//! vehicle's plane of symmetry and [`preview`] drawing the result.
+//! network on it. [`complete`] is the whole pipeline a user runs, with [`clean`] removing what
+//! segmentation left around the vehicle, [`orient`] finding which way it faces, [`symmetry`]
+//! finding its plane of symmetry and [`preview`] drawing the result.
 
 pub mod camera;
+pub mod clean;
 pub mod cli;
 pub mod cloud;
 pub mod commands;
@@ -25,6 +27,7 @@ pub mod knn;
 pub mod mesh;
 pub mod metrics;
 pub mod model;
+pub mod orient;
 pub mod preview;
 pub mod projection;
 pub mod raster;

@@ -8,6 +8,8 @@ use predicates::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+mod common;
+
 fn mvpcc() -> Command {
     Command::cargo_bin("mvpcc").unwrap()
 }
@@ -16,8 +18,7 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Six synthetic objects (some for validation), two samples each, 32-pixel views: made once
-/// per test run and shared by the tests, which only read it.
+/// The tiny dataset, made once per test run and shared by the tests, which only read it.
 fn data() -> &'static Path {
     static DATA: OnceLock<PathBuf> = OnceLock::new();
     DATA.get_or_init(|| {
@@ -25,20 +26,7 @@ fn data() -> &'static Path {
         if dir.exists() {
             std::fs::remove_dir_all(&dir).unwrap();
         }
-        mvpcc()
-            .args([
-                "prepare",
-                "--synth",
-                "6",
-                "--split",
-                "0.67",
-                "--samples",
-                "2",
-            ])
-            .args(["--size", "32", "--gt-size", "64", "--min-points", "500"])
-            .args(["--max-points", "3000", "-q", "--out", s(&dir)])
-            .assert()
-            .success();
+        common::prepare_tiny_data(&dir);
         dir
     })
 }
@@ -230,6 +218,10 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
         .assert()
         .failure()
         .stderr(predicate::str::contains("not a shapenet-views directory"));
+    assert!(
+        !fresh.exists(),
+        "refused data leaves no run directory behind"
+    );
 }
 
 #[test]

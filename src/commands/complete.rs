@@ -1,35 +1,54 @@
 use super::project::default_up;
 use super::{load, progress, Log};
+use crate::clean::clean;
 use crate::cli::CompleteArgs;
 use crate::cloud::PointCloud;
 use crate::complete::{complete, Completion, Method, Options, DEFAULT_MODEL, SYNTHETIC};
 use crate::device::{open, DeviceChoice};
 use crate::filter::SorParams;
+use crate::frame::UpAxis;
 use crate::inpaint::Inpainter;
 use crate::io::{atomic_write, check_output, write_cloud, Format};
+use crate::orient::{orient, Orienter, DEFAULT_ORIENTER};
 use crate::preview::{render, Layer};
 use anyhow::{anyhow, bail, Context};
+use burn::tensor::Device;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+/// The networks a run needs, loaded once for all its files.
+struct Models {
+    inpainter: Option<Inpainter>,
+    orienter: Option<Orienter>,
+}
+
 pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     let inpainter = match args.method {
         Method::Network => Some(load_model(args.model.as_deref(), args.device, log)?),
         Method::Identity | Method::Mirror => None,
     };
+    let orienter = if args.orient.needs_network() {
+        Some(load_orienter(args.orienter.as_deref())?)
+    } else {
+        None
+    };
+    let models = Models {
+        inpainter,
+        orienter,
+    };
     match (&args.input, &args.output, &args.input_dir, &args.output_dir) {
         (Some(input), Some(output), _, _) => {
-            let report = complete_file(input, output, &args, inpainter.as_ref(), log)?;
+            let report = complete_file(input, output, &args, &models, log)?;
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
             Ok(())
         }
         (_, _, Some(input_dir), Some(output_dir)) => {
-            batch(input_dir, output_dir, &args, inpainter.as_ref(), log)
+            batch(input_dir, output_dir, &args, &models, log)
         }
         _ => bail!("give IN and OUT, or --input-dir and --output-dir"),
     }
@@ -59,12 +78,30 @@ fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Re
     Ok(inpainter)
 }
 
-fn options(args: &CompleteArgs, input: &Path) -> Options {
+/// The orientation network from `--orienter` or the built-in one; it is small and runs on the
+/// CPU.
+fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
+    match path {
+        Some(path) => {
+            let bytes = std::fs::read(path).with_context(|| format!("{}", path.display()))?;
+            Orienter::from_bytes(&bytes, Device::flex())
+                .with_context(|| format!("{}", path.display()))
+        }
+        None => Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())
+            .context("the built-in orientation network"),
+    }
+}
+
+fn up_axis(args: &CompleteArgs, input: &Path) -> UpAxis {
+    args.up
+        .unwrap_or_else(|| default_up(input, args.input_options.format))
+}
+
+fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
     Options {
         method: args.method,
-        up: args
-            .up
-            .unwrap_or_else(|| default_up(input, args.input_options.format)),
+        up: up_axis(args, input),
+        heading,
         views: args.views.0.clone(),
         erode: args.erode,
         smooth: args.smooth,
@@ -100,7 +137,7 @@ fn complete_file(
     input: &Path,
     output: &Path,
     args: &CompleteArgs,
-    inpainter: Option<&Inpainter>,
+    models: &Models,
     log: Log,
 ) -> anyhow::Result<Value> {
     let total = Instant::now();
@@ -109,8 +146,31 @@ fn complete_file(
     let start = Instant::now();
     let cloud = load(input, args.input_options.format, log)?;
     let read = start.elapsed();
-    let done = complete(&cloud, inpainter, &options(args, input))
-        .map_err(|e| anyhow!("{}: {e}", input.display()))?;
+    let up = up_axis(args, input);
+    let start = Instant::now();
+    let (cloud, cleaned) = if args.clean {
+        let (cleaned, report) = clean(&cloud, up);
+        log.info(format!(
+            "{}: --clean removed {} ground, {} isolated and {} other-object points",
+            input.display(),
+            report.ground,
+            report.isolated,
+            report.other_objects
+        ));
+        (cleaned, Some(report))
+    } else {
+        (cloud, None)
+    };
+    let cleaning = start.elapsed();
+    let start = Instant::now();
+    let orientation = orient(&cloud, up, args.orient, models.orienter.as_ref());
+    let orienting = start.elapsed();
+    let done = complete(
+        &cloud,
+        models.inpainter.as_ref(),
+        &options(args, input, orientation.heading),
+    )
+    .map_err(|e| anyhow!("{}: {e}", input.display()))?;
     for w in &done.warnings {
         log.warn(format!("{}: {w}", input.display()));
     }
@@ -127,7 +187,7 @@ fn complete_file(
     }
     let total = total.elapsed();
     log.info(format!(
-        "{}: {} points → {} ({} completed{}) in {:.2} s",
+        "{}: {} points → {} ({} completed{}{}) in {:.2} s",
         output.display(),
         done.input_points,
         done.cloud.len(),
@@ -137,11 +197,17 @@ fn complete_file(
         } else {
             String::new()
         },
+        orientation.heading.map_or(String::new(), |h| format!(
+            "; heading {h:.1}° ({})",
+            orientation.method
+        )),
         total.as_secs_f64()
     ));
     let t = &done.timings;
     let rows = [
         ("read", read),
+        ("clean", cleaning),
+        ("orientation", orienting),
         ("symmetry", t.symmetry),
         ("projection", t.projection),
         ("encoder", t.encoder),
@@ -171,6 +237,8 @@ fn complete_file(
             "mirrored": done.mirrored,
             "filtered_out": done.filtered_out,
             "symmetry_plane": done.plane.map(|p| json!({"x": p.offset, "support": p.support})),
+            "orientation": {"heading": orientation.heading, "method": orientation.method},
+            "cleaned": cleaned,
             "warnings": done.warnings,
             "seconds": timings,
     }))
@@ -260,7 +328,7 @@ fn batch(
     input_dir: &Path,
     output_dir: &Path,
     args: &CompleteArgs,
-    inpainter: Option<&Inpainter>,
+    models: &Models,
     log: Log,
 ) -> anyhow::Result<()> {
     if !input_dir.is_dir() {
@@ -294,7 +362,7 @@ fn batch(
                     .parent()
                     .map_or(Ok(()), std::fs::create_dir_all)
                     .with_context(|| format!("{}: cannot create", output.display()))
-                    .and_then(|()| complete_file(&input, &output, args, inpainter, quiet_file));
+                    .and_then(|()| complete_file(&input, &output, args, models, quiet_file));
                 results.lock().expect("no worker panics").push((i, result));
                 bar.inc(1);
             });
@@ -354,6 +422,20 @@ fn extension(format: Format) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cli::{Cli, Command};
+    use clap::Parser;
+
+    #[test]
+    fn the_library_defaults_are_the_commands() {
+        let cli = Cli::try_parse_from(["mvpcc", "complete", "in.ply", "out.ply"]).unwrap();
+        let Command::Complete(args) = cli.command else {
+            panic!("parsed as another command");
+        };
+        assert_eq!(
+            options(&args, Path::new("in.ply"), None),
+            Options::default()
+        );
+    }
 
     #[test]
     fn wildcards() {

@@ -9,6 +9,7 @@ mod project;
 mod reproject;
 mod synth;
 mod train;
+mod train_orient;
 
 use crate::cli::{Cli, Command};
 use crate::cloud::PointCloud;
@@ -28,6 +29,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Prepare(args) => prepare::run(args, log),
         Command::Synth(args) => synth::run(args, log),
         Command::Train(args) => train::run(args, log),
+        Command::TrainOrient(args) => train_orient::run(args, log),
     }
 }
 

@@ -21,6 +21,8 @@ const KEY_CONFIG: &str = "mvpcc.model_config";
 pub enum Network {
     Generator,
     Discriminator,
+    /// The orientation network ([`crate::orient::Orienter`]).
+    Orienter,
 }
 
 impl Network {
@@ -28,6 +30,7 @@ impl Network {
         match self {
             Network::Generator => "generator",
             Network::Discriminator => "discriminator",
+            Network::Orienter => "orienter",
         }
     }
 }
@@ -83,6 +86,16 @@ fn metadata(bytes: &[u8]) -> Result<BTreeMap<String, String>, WeightsError> {
 /// The config a weights file declares, after checking that it holds `network` in a format
 /// this build reads.
 pub fn read_config(bytes: &[u8], network: Network) -> Result<ModelConfig, WeightsError> {
+    let config: ModelConfig = read_declared(bytes, network)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// The config of any network's file, unchecked beyond its kind and format version.
+pub(crate) fn read_declared<C: serde::de::DeserializeOwned>(
+    bytes: &[u8],
+    network: Network,
+) -> Result<C, WeightsError> {
     let meta = metadata(bytes)?;
     let kind = meta.get(KEY_KIND).ok_or(WeightsError::NotMvpcc)?;
     if kind != network.name() {
@@ -95,19 +108,17 @@ pub fn read_config(bytes: &[u8], network: Network) -> Result<ModelConfig, Weight
     if version != FORMAT_VERSION.to_string() {
         return Err(WeightsError::Version { found: version });
     }
-    let config: ModelConfig = serde_json::from_str(
+    serde_json::from_str(
         meta.get(KEY_CONFIG)
             .ok_or_else(|| WeightsError::Config(format!("no {KEY_CONFIG} in the metadata")))?,
     )
-    .map_err(|e| WeightsError::Config(e.to_string()))?;
-    config.validate()?;
-    Ok(config)
+    .map_err(|e| WeightsError::Config(e.to_string()))
 }
 
-fn to_bytes<M: Module>(
+pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
     module: &M,
     network: Network,
-    config: &ModelConfig,
+    config: &C,
 ) -> Result<Vec<u8>, WeightsError> {
     let config = serde_json::to_string(config).map_err(|e| WeightsError::Save(e.to_string()))?;
     let mut store = SafetensorsStore::from_bytes(None)
@@ -122,7 +133,7 @@ fn to_bytes<M: Module>(
         .map_err(|e| WeightsError::Save(e.to_string()))
 }
 
-fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
+pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
     let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()));
     let result = module
         .load_from(&mut store)

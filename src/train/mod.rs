@@ -409,7 +409,6 @@ impl Validator {
 pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError> {
     let settings = &job.settings;
     let run = &job.run;
-    std::fs::create_dir_all(run).map_err(io_err(run))?;
     let autodiff = job.device.clone().autodiff();
     let vgg = match &settings.vgg19 {
         Some(path) => {
@@ -445,6 +444,8 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         &cameras,
         &cache,
     )?;
+    // Only now: data that is refused must leave no run directory behind.
+    std::fs::create_dir_all(run).map_err(io_err(run))?;
 
     let (mut gan, mut state) = match checkpoint::latest(run)? {
         Some(dir) if job.resume => {

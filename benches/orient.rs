@@ -1,0 +1,31 @@
+use burn::tensor::Device;
+use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::clean::clean;
+use mvpcc::frame::UpAxis;
+use mvpcc::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use std::time::Duration;
+
+mod common;
+
+fn orientation(c: &mut Criterion) {
+    let (car, name) = common::mls_car();
+    let orienter = Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex()).unwrap();
+    let mut group = c.benchmark_group(format!("orientation, {} points ({name})", car.len()));
+    group
+        .sample_size(20)
+        .measurement_time(Duration::from_secs(5));
+    for (label, mode) in [
+        ("geometric", OrientMode::Geometric),
+        ("learned", OrientMode::Learned),
+        ("combined", OrientMode::Combined),
+    ] {
+        group.bench_function(label, |b| {
+            b.iter(|| orient(&car, UpAxis::Y, mode, Some(&orienter)))
+        });
+    }
+    group.bench_function("clean", |b| b.iter(|| clean(&car, UpAxis::Y)));
+    group.finish();
+}
+
+criterion_group!(benches, orientation);
+criterion_main!(benches);

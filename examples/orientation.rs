@@ -1,0 +1,229 @@
+//! Measures the orientation stage (README, *Orientation*): every partial of a `prepare` test
+//! split is turned by a random yaw, the estimators' heading errors are collected, and the
+//! completion of the turned partial (`--orient auto`, turned back) is scored like `mvpcc eval
+//! --data` next to the completions of the partial as it is (`--orient none`, the pipeline
+//! before orientation existed, and `--orient auto`). Real scans given with `--mls` are turned by random yaws too, and their completions,
+//! turned back, are compared with the completion of the scan as it is.
+//!
+//! `cargo run --release --example orientation -- --data EVALSET [--mls DIR] [--seed N]
+//! [--limit N] [--orienter FILE] [--model FILE]`
+
+use burn::tensor::Device;
+use mvpcc::cloud::PointCloud;
+use mvpcc::complete::{complete, Options, DEFAULT_MODEL};
+use mvpcc::data::{Layout, Manifest, TEST};
+use mvpcc::frame::{Frame, UpAxis};
+use mvpcc::inpaint::Inpainter;
+use mvpcc::io::read_cloud;
+use mvpcc::metrics::compare_clouds;
+use mvpcc::orient::train::OrientScores;
+use mvpcc::orient::{angle_between, orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::scan::PartialSpec;
+use mvpcc::shapes::Lcg;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+type Error = Box<dyn std::error::Error>;
+
+const MODES: [(&str, OrientMode); 3] = [
+    ("geometric", OrientMode::Geometric),
+    ("learned", OrientMode::Learned),
+    ("combined", OrientMode::Combined),
+];
+
+fn arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+/// The cloud turned counter-clockwise (seen from above, y up) by `turn` degrees about the
+/// vertical through `pivot`.
+fn turned(cloud: &PointCloud, turn: f64, pivot: [f64; 3]) -> PointCloud {
+    let (s, c) = turn.to_radians().sin_cos();
+    PointCloud {
+        positions: cloud
+            .positions
+            .iter()
+            .map(|p| {
+                let (x, z) = (p[0] - pivot[0], p[2] - pivot[2]);
+                [pivot[0] + c * x + s * z, p[1], pivot[2] - s * x + c * z]
+            })
+            .collect(),
+        ..cloud.clone()
+    }
+}
+
+fn options(heading: Option<f64>) -> Options {
+    Options {
+        heading,
+        ..Options::default()
+    }
+}
+
+/// Heading of the object's front (−z in its ground truth's frame) in a partial's own frame:
+/// scanner partials are stored in the simulated drive's frame, up to ±10° off the object's axis.
+fn heading_in_partial(spec: &PartialSpec) -> f64 {
+    let columns =
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|e| spec.to_object_frame(e));
+    // The partial-frame direction of the front: the transposed map applied to (0, 0, −1).
+    let front = columns.map(|c| -f64::from(c[2]));
+    (-front[2]).atan2(front[0]).to_degrees().rem_euclid(360.0)
+}
+
+fn summary(label: &str, errors: &mut [f64]) {
+    let s = OrientScores::of(errors);
+    println!(
+        "{label:<28} n {:>4}  median {:>6.2}°  p95 {:>7.2}°  flips {:>5.1} %",
+        errors.len(),
+        s.median,
+        s.p95,
+        100.0 * s.flips
+    );
+}
+
+fn main() -> Result<(), Error> {
+    let data = PathBuf::from(arg("--data").ok_or("--data EVALSET is required")?);
+    let seed: u64 = arg("--seed").map_or(Ok(1), |s| s.parse())?;
+    let limit: usize = arg("--limit").map_or(Ok(usize::MAX), |s| s.parse())?;
+    let orienter_bytes = match arg("--orienter") {
+        Some(p) => std::fs::read(p)?,
+        None => DEFAULT_ORIENTER.to_vec(),
+    };
+    let model_bytes = match arg("--model") {
+        Some(p) => std::fs::read(p)?,
+        None => DEFAULT_MODEL.to_vec(),
+    };
+    let orienter = Orienter::from_bytes(&orienter_bytes, Device::flex())?;
+    let inpainter = Inpainter::from_bytes(&model_bytes, Device::flex())?;
+    let mut rng = Lcg::new(seed);
+
+    let mut errors: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let mut quality: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let manifest: Manifest =
+        serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json"))?)?;
+    let layout = Layout { root: data.clone() };
+    let mut count = 0;
+    for model in manifest.models.iter().filter(|m| m.split == TEST) {
+        let dir = layout.clouds(&model.split, &model.category, &model.name);
+        let gt = read_cloud(&dir.join("gt.ply"), None)?.cloud;
+        for sample in &model.samples {
+            if count == limit {
+                break;
+            }
+            count += 1;
+            let cloud = read_cloud(&dir.join(format!("partial_{}.ply", sample.k)), None)?.cloud;
+            let turn = rng.range(-180.0, 180.0);
+            let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
+            let rotated = turned(&cloud, turn, pivot);
+            let truth = (heading_in_partial(&sample.spec) + turn).rem_euclid(360.0);
+            for (name, mode) in MODES {
+                let found = orient(&rotated, UpAxis::Y, mode, Some(&orienter)).heading;
+                let e = angle_between(found.unwrap_or(f64::NAN), truth);
+                errors.entry(name.to_string()).or_default().push(e);
+                errors
+                    .entry(format!("{name} {}", model.category))
+                    .or_default()
+                    .push(e);
+            }
+            // As `mvpcc eval --data` scores: back into the object's frame, stored coordinates.
+            let score = |completed: &PointCloud| {
+                let pred: Vec<[f64; 3]> = completed
+                    .positions
+                    .iter()
+                    .map(|p| {
+                        sample
+                            .spec
+                            .to_object_frame(p.map(|c| c as f32))
+                            .map(f64::from)
+                    })
+                    .collect();
+                let m = compare_clouds(&pred, &gt.positions, &[0.01]);
+                (m.cd_l2_half, m.fscores[0].f1)
+            };
+            let protocol = match sample.spec {
+                PartialSpec::Cameras { .. } => "cameras",
+                PartialSpec::Scanner { .. } => "scanner",
+            };
+            let mut record = |label: &str, value: (f64, f64)| {
+                for key in [label.to_string(), format!("{label} ({protocol})")] {
+                    quality.entry(key).or_default().push(value);
+                }
+            };
+            let plain = complete(&cloud, Some(&inpainter), &options(None))?;
+            record("as is, --orient none", score(&plain.cloud));
+            for (label, mode) in [("auto", OrientMode::Auto), ("learned", OrientMode::Learned)] {
+                let heading = orient(&cloud, UpAxis::Y, mode, Some(&orienter)).heading;
+                let done = complete(&cloud, Some(&inpainter), &options(heading))?;
+                record(&format!("as is, --orient {label}"), score(&done.cloud));
+            }
+            let heading = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
+            let auto = complete(&rotated, Some(&inpainter), &options(heading))?;
+            let back = turned(&auto.cloud, -turn, pivot);
+            record("turned, --orient auto", score(&back));
+        }
+    }
+    println!("heading error on {count} generated partials, random yaw:");
+    for (label, e) in errors.iter_mut() {
+        summary(label, e);
+    }
+    println!("completion quality against the ground truth (cd_l2_half, F1@0.01):");
+    for (label, q) in &quality {
+        let n = q.len() as f64;
+        let cd = q.iter().map(|v| v.0).sum::<f64>() / n;
+        let f1 = q.iter().map(|v| v.1).sum::<f64>() / n;
+        println!("{label:<40} n {:>4}  CD {cd:.3e}  F1 {f1:.4}", q.len());
+    }
+
+    if let Some(mls) = arg("--mls") {
+        println!(
+            "real scans turned by random yaws (CD between turned-back and as-is completions):"
+        );
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&mls)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "pcd"))
+            .collect();
+        files.sort();
+        let mut mls_errors = Vec::new();
+        for path in files {
+            let cloud = read_cloud(&path, None)?.cloud;
+            let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
+            let heading = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
+            let plain = complete(&cloud, Some(&inpainter), &options(heading))?;
+            // The scans are only roughly in the canonical pose (heading 90°), so the turned
+            // scans' headings are checked against the scan's own estimate, turned.
+            let own = heading.unwrap_or(90.0);
+            println!(
+                "{:<12} as is: heading {own:.2}° ({:.2}° from the canonical 90°)",
+                path.file_name().unwrap_or_default().to_string_lossy(),
+                angle_between(own, 90.0)
+            );
+            for _ in 0..5 {
+                let turn = rng.range(-180.0, 180.0);
+                let rotated = turned(&cloud, turn, pivot);
+                let found = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
+                let e = angle_between(found.unwrap_or(f64::NAN), own + turn);
+                mls_errors.push(e);
+                let done = complete(&rotated, Some(&inpainter), &options(found))?;
+                let back = turned(&done.cloud, -turn, pivot);
+                let frame = Frame::fit(&cloud, UpAxis::Y)?;
+                let m = compare_clouds(
+                    &frame.normalize(&back).positions,
+                    &frame.normalize(&plain.cloud).positions,
+                    &[0.01],
+                );
+                println!(
+                    "{:<12} turn {turn:>7.1}°  heading vs as is + turn {e:>6.2}°  CD {:.3e}  F1@0.01 {:.4}  points {} vs {}",
+                    path.file_name().unwrap_or_default().to_string_lossy(),
+                    m.cd_l2_half,
+                    m.fscores[0].f1,
+                    back.len(),
+                    plain.cloud.len()
+                );
+            }
+        }
+        summary("real scans, auto vs as is + turn", &mut mls_errors);
+    }
+    Ok(())
+}

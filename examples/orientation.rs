@@ -6,7 +6,7 @@
 //! turned back, are compared with the completion of the scan as it is.
 //!
 //! `cargo run --release --example orientation -- --data EVALSET [--mls DIR] [--seed N]
-//! [--limit N] [--orienter FILE] [--model FILE]`
+//! [--limit N] [--orienter FILE] [--model FILE] [--headings-only]`
 
 use burn::tensor::Device;
 use mvpcc::cloud::PointCloud;
@@ -87,6 +87,7 @@ fn main() -> Result<(), Error> {
     let data = PathBuf::from(arg("--data").ok_or("--data EVALSET is required")?);
     let seed: u64 = arg("--seed").map_or(Ok(1), |s| s.parse())?;
     let limit: usize = arg("--limit").map_or(Ok(usize::MAX), |s| s.parse())?;
+    let headings_only = std::env::args().any(|a| a == "--headings-only");
     let orienter_bytes = match arg("--orienter") {
         Some(p) => std::fs::read(p)?,
         None => DEFAULT_ORIENTER.to_vec(),
@@ -118,14 +119,32 @@ fn main() -> Result<(), Error> {
             let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
             let rotated = turned(&cloud, turn, pivot);
             let truth = (heading_in_partial(&sample.spec) + turn).rem_euclid(360.0);
+            let protocol = match sample.spec {
+                PartialSpec::Cameras { .. } => "cameras",
+                PartialSpec::Scanner { .. } => "scanner",
+            };
             for (name, mode) in MODES {
-                let found = orient(&rotated, UpAxis::Y, mode, Some(&orienter)).heading;
-                let e = angle_between(found.unwrap_or(f64::NAN), truth);
-                errors.entry(name.to_string()).or_default().push(e);
-                errors
-                    .entry(format!("{name} {}", model.category))
-                    .or_default()
-                    .push(e);
+                let found = orient(&rotated, UpAxis::Y, mode, Some(&orienter));
+                let heading = found.heading.unwrap_or(f64::NAN);
+                let unrefined = heading - found.refinement.unwrap_or(0.0);
+                for (name, e) in [
+                    (name.to_string(), angle_between(heading, truth)),
+                    (
+                        format!("{name}, unrefined"),
+                        angle_between(unrefined, truth),
+                    ),
+                ] {
+                    for key in [
+                        name.clone(),
+                        format!("{name} {}", model.category),
+                        format!("{name} ({protocol})"),
+                    ] {
+                        errors.entry(key).or_default().push(e);
+                    }
+                }
+            }
+            if headings_only {
+                continue;
             }
             // As `mvpcc eval --data` scores: back into the object's frame, stored coordinates.
             let score = |completed: &PointCloud| {
@@ -142,10 +161,6 @@ fn main() -> Result<(), Error> {
                 let m = compare_clouds(&pred, &gt.positions, &[0.01]);
                 (m.cd_l2_half, m.fscores[0].f1)
             };
-            let protocol = match sample.spec {
-                PartialSpec::Cameras { .. } => "cameras",
-                PartialSpec::Scanner { .. } => "scanner",
-            };
             let mut record = |label: &str, value: (f64, f64)| {
                 for key in [label.to_string(), format!("{label} ({protocol})")] {
                     quality.entry(key).or_default().push(value);
@@ -158,6 +173,12 @@ fn main() -> Result<(), Error> {
                 let done = complete(&cloud, Some(&inpainter), &options(heading))?;
                 record(&format!("as is, --orient {label}"), score(&done.cloud));
             }
+            let exact = complete(
+                &cloud,
+                Some(&inpainter),
+                &options(Some(heading_in_partial(&sample.spec))),
+            )?;
+            record("as is, the true heading", score(&exact.cloud));
             let heading = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
             let auto = complete(&rotated, Some(&inpainter), &options(heading))?;
             let back = turned(&auto.cloud, -turn, pivot);

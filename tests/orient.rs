@@ -190,10 +190,18 @@ fn orient_modes_are_reported_and_bad_ones_refused() {
             .success();
         let report = json_of(&assert.get_output().stdout);
         assert_eq!(report["orientation"]["method"], method, "{mode}");
+        let refinement = &report["orientation"]["refinement"];
         match heading {
-            Some(h) => assert_eq!(report["orientation"]["heading"].as_f64(), Some(h)),
+            Some(h) => {
+                assert_eq!(report["orientation"]["heading"].as_f64(), Some(h));
+                assert!(refinement.is_null(), "a given heading is not refined");
+            }
             None if mode == "none" => assert!(report["orientation"]["heading"].is_null()),
-            None => assert!(report["orientation"]["heading"].as_f64().is_some()),
+            None => {
+                assert!(report["orientation"]["heading"].as_f64().is_some());
+                let turn = refinement.as_f64().expect("a car scan is symmetric");
+                assert!(turn.abs() <= 8.0, "{mode}: refined by {turn}°");
+            }
         }
     }
     mvpcc()

@@ -237,7 +237,11 @@ fn complete_file(
             "mirrored": done.mirrored,
             "filtered_out": done.filtered_out,
             "symmetry_plane": done.plane.map(|p| json!({"x": p.offset, "support": p.support})),
-            "orientation": {"heading": orientation.heading, "method": orientation.method},
+            "orientation": {
+                "heading": orientation.heading,
+                "method": orientation.method,
+                "refinement": orientation.refinement,
+            },
             "cleaned": cleaned,
             "warnings": done.warnings,
             "seconds": timings,

@@ -18,6 +18,7 @@ pub use net::{Orienter, OrienterConfig, OrienterNet};
 
 use crate::cloud::PointCloud;
 use crate::frame::{upright, UpAxis};
+use crate::symmetry::refine_heading;
 use std::str::FromStr;
 
 /// The built-in orientation network (see README, *Orientation*, for how it was trained).
@@ -83,38 +84,62 @@ pub struct Orientation {
     /// `None` for `--orient none`: the frame keeps the input's axes.
     pub heading: Option<f64>,
     pub method: &'static str,
+    /// Degrees the symmetry plane turned the estimator's heading (see [`refine_heading`]);
+    /// `None` when the heading was given or the cloud showed no symmetry near it.
+    pub refinement: Option<f64>,
 }
 
 /// Finds the heading of `cloud` (up axis `up`). `orienter` is needed by the modes that
-/// [`OrientMode::needs_network`].
+/// [`OrientMode::needs_network`]. An estimated heading is then turned onto the cloud's plane of
+/// symmetry.
 pub fn orient(
     cloud: &PointCloud,
     up: UpAxis,
     mode: OrientMode,
     orienter: Option<&Orienter>,
 ) -> Orientation {
-    let fixed = |heading, method| Orientation { heading, method };
+    let fixed = |heading, method| Orientation {
+        heading,
+        method,
+        refinement: None,
+    };
     match mode.resolved() {
         OrientMode::None => fixed(None, "none"),
         OrientMode::Heading(h) => fixed(Some(h), "given"),
         mode => {
             let points = upright_points(cloud, up);
             let learned = || orienter.map(|o| o.heading(&points));
-            let heading = match mode {
+            let estimate = match mode {
                 OrientMode::Geometric => geometric(&points),
                 OrientMode::Learned => learned().or_else(|| geometric(&points)),
                 _ => match (footprint_axis(&points), learned()) {
                     (Some(axis), Some(learned)) => Some(toward(axis, learned)),
                     (axis, learned) => learned.or(axis.and_then(|_| geometric(&points))),
                 },
-            };
+            }
+            .unwrap_or(90.0);
             let method = match mode {
                 OrientMode::Geometric => "geometric",
                 OrientMode::Learned => "learned",
                 _ => "combined",
             };
-            fixed(heading.or(Some(90.0)), method)
+            let refined = refine_heading(&points, estimate);
+            Orientation {
+                heading: Some(refined.unwrap_or(estimate)),
+                method,
+                refinement: refined.map(|r| signed_turn(estimate, r)),
+            }
         }
+    }
+}
+
+/// The turn from heading `a` to heading `b`, in (−180°, 180°].
+fn signed_turn(a: f64, b: f64) -> f64 {
+    let d = (b - a).rem_euclid(360.0);
+    if d > 180.0 {
+        d - 360.0
+    } else {
+        d
     }
 }
 

@@ -203,7 +203,7 @@ mod tests {
             assert!(p.iter().all(|v| v.abs() <= 0.5 + 1e-6), "{p:?}");
         }
         let z: Vec<f32> = s.chunks(3).map(|p| p[2]).collect();
-        assert!(z.iter().any(|&v| v == 0.5) && z.iter().any(|&v| v == -0.5));
+        assert!(z.contains(&0.5) && z.contains(&-0.5));
     }
 
     #[test]

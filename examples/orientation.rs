@@ -3,12 +3,15 @@
 //! completion of the turned partial (`--orient auto`, turned back) is scored like `mvpcc eval
 //! --data` next to the completions of the partial as it is (`--orient none`, the pipeline
 //! before orientation existed, and `--orient auto`). Real scans given with `--mls` are turned by random yaws too, and their completions,
-//! turned back, are compared with the completion of the scan as it is.
+//! turned back, are compared with the completion of the scan as it is; then cluttered with what
+//! segmentation leaves (ground, noise points, a piece of a neighbour) to measure orientation with
+//! and without `--clean`, and what `--clean` removes.
 //!
 //! `cargo run --release --example orientation -- --data EVALSET [--mls DIR] [--seed N]
 //! [--limit N] [--orienter FILE] [--model FILE] [--headings-only]`
 
 use burn::tensor::Device;
+use mvpcc::clean::clean;
 use mvpcc::cloud::PointCloud;
 use mvpcc::complete::{complete, Options, DEFAULT_MODEL};
 use mvpcc::data::{Layout, Manifest, TEST};
@@ -20,7 +23,7 @@ use mvpcc::orient::train::OrientScores;
 use mvpcc::orient::{angle_between, orient, OrientMode, Orienter, DEFAULT_ORIENTER};
 use mvpcc::scan::PartialSpec;
 use mvpcc::shapes::Lcg;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
 
 type Error = Box<dyn std::error::Error>;
@@ -53,6 +56,50 @@ fn turned(cloud: &PointCloud, turn: f64, pivot: [f64; 3]) -> PointCloud {
             .collect(),
         ..cloud.clone()
     }
+}
+
+/// What a segmentation leaves around a y-up scan of `n` points: a ground patch under it
+/// reaching 0.6 m past its footprint (0.3·n points, ±1 cm), 15 noise points up to 2 m around
+/// it, and a 1 × 1.5 m piece of a neighbouring vehicle's side 0.4 m past its +x end (0.05·n
+/// points), uniformly random. Returns the counts added.
+fn clutter(cloud: &PointCloud, rng: &mut Lcg) -> (PointCloud, [usize; 3]) {
+    let b = cloud.bounds().expect("a scan has points");
+    let n = cloud.len();
+    let mut positions = cloud.positions.clone();
+    let ground = 3 * n / 10;
+    for _ in 0..ground {
+        positions.push([
+            rng.range(b.min[0] - 0.6, b.max[0] + 0.6),
+            b.min[1] - 0.02 + 0.01 * rng.gauss(),
+            rng.range(b.min[2] - 0.6, b.max[2] + 0.6),
+        ]);
+    }
+    let noise = 15;
+    for _ in 0..noise {
+        positions.push([0, 1, 2].map(|i| rng.range(b.min[i] - 2.0, b.max[i] + 2.0)));
+    }
+    let other = n / 20;
+    let zc = rng.range(b.min[2], b.max[2]);
+    for _ in 0..other {
+        positions.push([
+            b.max[0] + 0.4,
+            b.min[1] + rng.range(0.0, 1.5),
+            zc + rng.range(0.0, 1.0),
+        ]);
+    }
+    let colors = cloud.colors.as_ref().map(|c| {
+        let mut c = c.clone();
+        c.resize(positions.len(), [90, 90, 90]);
+        c
+    });
+    (
+        PointCloud {
+            positions,
+            colors,
+            ..PointCloud::default()
+        },
+        [ground, noise, other],
+    )
 }
 
 fn options(heading: Option<f64>) -> Options {
@@ -207,8 +254,8 @@ fn main() -> Result<(), Error> {
             .collect();
         files.sort();
         let mut mls_errors = Vec::new();
-        for path in files {
-            let cloud = read_cloud(&path, None)?.cloud;
+        for path in &files {
+            let cloud = read_cloud(path, None)?.cloud;
             let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
             let heading = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
             let plain = complete(&cloud, Some(&inpainter), &options(heading))?;
@@ -245,6 +292,55 @@ fn main() -> Result<(), Error> {
             }
         }
         summary("real scans, auto vs as is + turn", &mut mls_errors);
+
+        println!("the same scans with clutter (ground, noise, a neighbour), auto heading vs as is + turn:");
+        let mut raw_errors = Vec::new();
+        let mut clean_errors = Vec::new();
+        for path in &files {
+            let cloud = read_cloud(path, None)?.cloud;
+            let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
+            let own = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter))
+                .heading
+                .unwrap_or(90.0);
+            for _ in 0..5 {
+                let turn = rng.range(-180.0, 180.0);
+                let rotated = turned(&cloud, turn, pivot);
+                let (cluttered, added) = clutter(&rotated, &mut rng);
+                let raw = orient(&cluttered, UpAxis::Y, OrientMode::Auto, Some(&orienter));
+                let (cleaned, report) = clean(&cluttered, UpAxis::Y);
+                let after = orient(&cleaned, UpAxis::Y, OrientMode::Auto, Some(&orienter));
+                let (e_raw, e_clean) = [raw, after]
+                    .map(|o| angle_between(o.heading.unwrap_or(f64::NAN), own + turn))
+                    .into();
+                raw_errors.push(e_raw);
+                clean_errors.push(e_clean);
+                let car: HashSet<[u64; 3]> = rotated
+                    .positions
+                    .iter()
+                    .map(|p| p.map(f64::to_bits))
+                    .collect();
+                let kept = cleaned
+                    .positions
+                    .iter()
+                    .filter(|p| car.contains(&p.map(f64::to_bits)))
+                    .count();
+                println!(
+                    "{:<12} turn {turn:>7.1}°  error {e_raw:>6.2}° as is, {e_clean:>6.2}° cleaned;  removed ground {}/{}  isolated {}/{}  other objects {}/{}  clutter left {}  scan points lost {}/{}",
+                    path.file_name().unwrap_or_default().to_string_lossy(),
+                    report.ground,
+                    added[0],
+                    report.isolated,
+                    added[1],
+                    report.other_objects,
+                    added[2],
+                    cleaned.len() - kept,
+                    rotated.len() - kept,
+                    rotated.len()
+                );
+            }
+        }
+        summary("cluttered scans, auto", &mut raw_errors);
+        summary("cluttered scans, --clean, auto", &mut clean_errors);
     }
     Ok(())
 }

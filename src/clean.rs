@@ -52,45 +52,57 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
         return (cloud.clone(), report);
     }
     let points = upright_points(cloud, up);
-    let extent = cloud
-        .bounds()
-        .map_or(1.0, |b| b.extent().into_iter().fold(0.0, f64::max));
     let mut keep = vec![true; points.len()];
 
-    if let Some(ground) = ground_points(&points, extent) {
-        for (k, g) in keep.iter_mut().zip(&ground) {
+    // Isolated points first: one stray return below the wheels or far to the side would
+    // otherwise set the ground band and the sizes.
+    let index = KnnIndex::new(&points);
+    let k = SPACING_NEIGHBOUR + 1;
+    let spacing: Vec<f64> = index
+        .k_nearest_distances(&points, k)
+        .chunks(k)
+        .map(|d| d[k - 1])
+        .collect();
+    let median = median(&spacing);
+    for (k, &s) in keep.iter_mut().zip(&spacing) {
+        if s > ISOLATED * median {
+            *k = false;
+            report.isolated += 1;
+        }
+    }
+
+    let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
+    let subset: Vec<[f64; 3]> = remaining.iter().map(|&i| points[i]).collect();
+    let extent = extent_of(&subset);
+    if let Some(ground) = ground_points(&subset, extent) {
+        for (&i, g) in remaining.iter().zip(&ground) {
             if *g {
-                *k = false;
+                keep[i] = false;
                 report.ground += 1;
             }
         }
     }
 
     let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
-    if remaining.len() > SPACING_NEIGHBOUR + 1 {
-        let subset: Vec<[f64; 3]> = remaining.iter().map(|&i| points[i]).collect();
-        let index = KnnIndex::new(&subset);
-        let k = SPACING_NEIGHBOUR + 1;
-        let spacing: Vec<f64> = index
-            .k_nearest_distances(&subset, k)
-            .chunks(k)
-            .map(|d| d[k - 1])
-            .collect();
-        let median = median(&spacing);
-        for (&i, &s) in remaining.iter().zip(&spacing) {
-            if s > ISOLATED * median {
-                keep[i] = false;
-                report.isolated += 1;
-            }
-        }
-        let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
-        let link = (LINK_SPACINGS * median).max(LINK_SHARE * extent);
-        for i in other_objects(&points, &remaining, link) {
-            keep[i] = false;
-            report.other_objects += 1;
-        }
+    let link = (LINK_SPACINGS * median).max(LINK_SHARE * extent);
+    for i in other_objects(&points, &remaining, link) {
+        keep[i] = false;
+        report.other_objects += 1;
     }
     (cloud.filter(&keep), report)
+}
+
+/// The longest side of the points' bounding box; 0 for no points.
+fn extent_of(points: &[[f64; 3]]) -> f64 {
+    let (lo, hi) = points
+        .iter()
+        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
+            (
+                [0, 1, 2].map(|i| lo[i].min(p[i])),
+                [0, 1, 2].map(|i| hi[i].max(p[i])),
+            )
+        });
+    (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max)
 }
 
 fn median(values: &[f64]) -> f64 {
@@ -228,8 +240,8 @@ mod tests {
     use super::*;
     use crate::orient::tests::car_block;
 
-    /// A car-like block (metres, z up) standing on a ground patch, with noise points and a
-    /// piece of a second object 3 m away.
+    /// A car-like block (metres, z up) standing on a ground patch, with noise points around
+    /// and below it and a piece of a second object 3 m away.
     fn scene() -> (PointCloud, usize, [usize; 3]) {
         let car: Vec<[f64; 3]> = car_block(20.0, [0.0, 0.0, 0.0])
             .into_iter()
@@ -243,7 +255,13 @@ mod tests {
                 ground += 1;
             }
         }
-        let noise = [[0.5, 0.2, 4.0], [-1.0, 1.5, 3.5], [2.9, -2.9, 2.5]];
+        // One stray return 1.5 m below the ground: the lowest point must not set the ground.
+        let noise = [
+            [0.5, 0.2, 4.0],
+            [-1.0, 1.5, 3.5],
+            [2.9, -2.9, 2.5],
+            [1.0, -1.0, -1.5],
+        ];
         positions.extend(noise);
         let mut other = 0;
         for i in 0..10 {

@@ -3,7 +3,7 @@
 //!
 //! Sizes are relative to the cloud's longest side, so metres and normalized clouds behave alike.
 
-use crate::cloud::PointCloud;
+use crate::cloud::{Aabb, PointCloud};
 use crate::frame::UpAxis;
 use crate::knn::KnnIndex;
 use crate::orient::upright_points;
@@ -73,7 +73,7 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
 
     let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
     let subset: Vec<[f64; 3]> = remaining.iter().map(|&i| points[i]).collect();
-    let extent = extent_of(&subset);
+    let extent = Aabb::of(&subset).map_or(0.0, |b| b.extent().into_iter().fold(0.0, f64::max));
     if let Some(ground) = ground_points(&subset, extent) {
         for (&i, g) in remaining.iter().zip(&ground) {
             if *g {
@@ -90,19 +90,6 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
         report.other_objects += 1;
     }
     (cloud.filter(&keep), report)
-}
-
-/// The longest side of the points' bounding box; 0 for no points.
-fn extent_of(points: &[[f64; 3]]) -> f64 {
-    let (lo, hi) = points
-        .iter()
-        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
-            (
-                [0, 1, 2].map(|i| lo[i].min(p[i])),
-                [0, 1, 2].map(|i| hi[i].max(p[i])),
-            )
-        });
-    (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max)
 }
 
 fn median(values: &[f64]) -> f64 {

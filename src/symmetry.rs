@@ -6,6 +6,7 @@
 //! Points close to a candidate plane map onto themselves whatever the candidate, so they are not
 //! counted; otherwise a flat side would always be "symmetric" about itself.
 
+use crate::cloud::Aabb;
 use crate::knn::KnnIndex;
 use rayon::prelude::*;
 
@@ -58,19 +59,12 @@ const MAX_TURN: f64 = 8.0;
 /// much, which costs more F1@0.01 than any other part of orientation; the symmetry plane of a
 /// vehicle pins its length axis to a fraction of a degree.
 pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
-    let (lo, hi) = points
-        .iter()
-        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
-            (
-                [0, 1, 2].map(|i| lo[i].min(p[i])),
-                [0, 1, 2].map(|i| hi[i].max(p[i])),
-            )
-        });
-    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    let bounds = Aabb::of(points)?;
+    let extent = bounds.extent().into_iter().fold(0.0, f64::max);
     if extent <= 0.0 {
         return None;
     }
-    let center = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
+    let center = bounds.center();
     let unit: Vec<[f64; 3]> = points
         .iter()
         .map(|p| [0, 1, 2].map(|i| (p[i] - center[i]) / extent))
@@ -231,14 +225,8 @@ const MAX_CELLS: usize = 1 << 22;
 
 impl MatchGrid {
     fn new(points: &[[f64; 3]], distance: f64) -> MatchGrid {
-        let (lo, hi) = points
-            .iter()
-            .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
-                (
-                    [0, 1, 2].map(|i| lo[i].min(p[i])),
-                    [0, 1, 2].map(|i| hi[i].max(p[i])),
-                )
-            });
+        let Aabb { min: lo, max: hi } =
+            Aabb::of(points).expect("a sample holds at least two points");
         let mut cell = distance;
         let dims = loop {
             let dims = [0, 1, 2].map(|i| ((hi[i] - lo[i]) / cell) as usize + 1);

@@ -204,6 +204,14 @@ fn orient_modes_are_reported_and_bad_ones_refused() {
             }
         }
     }
+    // The identity method's output does not depend on the heading, so none is estimated.
+    let assert = mvpcc()
+        .args(["complete", s(&input), s(&output), "--up", "z", "--json"])
+        .args(["--method", "identity"])
+        .assert()
+        .success();
+    let report = json_of(&assert.get_output().stdout);
+    assert_eq!(report["orientation"]["method"], "none");
     mvpcc()
         .args(["complete", s(&input), s(&output), "--orient", "sideways"])
         .assert()

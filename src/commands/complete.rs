@@ -9,7 +9,7 @@ use crate::filter::SorParams;
 use crate::frame::UpAxis;
 use crate::inpaint::Inpainter;
 use crate::io::{atomic_write, check_output, write_cloud, Format};
-use crate::orient::{orient, Orienter, DEFAULT_ORIENTER};
+use crate::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
 use crate::preview::{render, Layer};
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
@@ -30,7 +30,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
         Method::Network => Some(load_model(args.model.as_deref(), args.device, log)?),
         Method::Identity | Method::Mirror => None,
     };
-    let orienter = if args.orient.needs_network() {
+    let orienter = if orient_mode(&args).needs_network() {
         Some(load_orienter(args.orienter.as_deref())?)
     } else {
         None
@@ -89,6 +89,14 @@ fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
         }
         None => Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())
             .context("the built-in orientation network"),
+    }
+}
+
+/// `--orient`, except for the identity method, whose output does not depend on the frame.
+fn orient_mode(args: &CompleteArgs) -> OrientMode {
+    match args.method {
+        Method::Identity => OrientMode::None,
+        Method::Mirror | Method::Network => args.orient,
     }
 }
 
@@ -163,7 +171,7 @@ fn complete_file(
     };
     let cleaning = start.elapsed();
     let start = Instant::now();
-    let orientation = orient(&cloud, up, args.orient, models.orienter.as_ref());
+    let orientation = orient(&cloud, up, orient_mode(args), models.orienter.as_ref());
     let orienting = start.elapsed();
     let done = complete(
         &cloud,

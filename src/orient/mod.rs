@@ -251,11 +251,17 @@ pub fn footprint_axis(points: &[[f64; 3]]) -> Option<f64> {
 
 /// Length of the middle `1 − 2·TRIM` of `values` (reordered in place).
 fn trimmed_span(values: &mut [f64]) -> f64 {
+    let (lo, hi) = trimmed_range(values);
+    hi - lo
+}
+
+/// Ends of the middle `1 − 2·TRIM` of `values` (reordered in place).
+fn trimmed_range(values: &mut [f64]) -> (f64, f64) {
     let n = values.len();
     let cut = ((n as f64 * TRIM) as usize).min((n - 1) / 2);
     let hi = *values.select_nth_unstable_by(n - 1 - cut, f64::total_cmp).1;
     let lo = *values.select_nth_unstable_by(cut, f64::total_cmp).1;
-    hi - lo
+    (lo, hi)
 }
 
 /// Share of the points on the footprint rectangle's long sides above which the rectangle's
@@ -276,15 +282,12 @@ fn flank_share(points: &[[f64; 3]], heading: f64) -> f64 {
         return 0.0;
     }
     let band = 0.01 * trimmed_span(&mut along);
-    let n = across.len();
-    let cut = ((n as f64 * TRIM) as usize).min((n - 1) / 2);
-    let hi = *across.select_nth_unstable_by(n - 1 - cut, f64::total_cmp).1;
-    let lo = *across.select_nth_unstable_by(cut, f64::total_cmp).1;
+    let (lo, hi) = trimmed_range(&mut across);
     let on_sides = across
         .iter()
         .filter(|&&u| (u - lo).abs() < band || (u - hi).abs() < band)
         .count();
-    on_sides as f64 / n as f64
+    on_sides as f64 / across.len() as f64
 }
 
 /// Points above this share of the height count as the vehicle's top.

@@ -48,7 +48,7 @@ pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
     if support < MIN_SCORE {
         return None;
     }
-    let offset = held_back(points, [1.0, 0.0], offset);
+    let offset = held_back(points, offset);
     Some(Plane {
         offset,
         support: sample.support([1.0, 0.0], offset),
@@ -56,15 +56,14 @@ pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
     })
 }
 
-/// The offset `c` of the vertical plane `p·n = c`, held back at the middle of the points' width
-/// along `n` when it lies beyond it towards the better scanned side (see [`find_plane`]).
-fn held_back(points: &[[f64; 3]], n: [f64; 2], c: f64) -> f64 {
-    let along = |p: &[f64; 3]| p[0] * n[0] + p[2] * n[1];
+/// The plane offset `c`, held back at the middle of the points' x range when it lies beyond it
+/// towards the better scanned side (see [`find_plane`]).
+fn held_back(points: &[[f64; 3]], c: f64) -> f64 {
     let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-        (lo.min(along(p)), hi.max(along(p)))
+        (lo.min(p[0]), hi.max(p[0]))
     });
     let middle = (lo + hi) / 2.0;
-    let mean = points.iter().map(along).sum::<f64>() / points.len() as f64;
+    let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
     // The side holding more of the points is the better scanned one.
     let scanned_side = (mean - middle).signum();
     if (c - middle) * scanned_side > 0.0 {

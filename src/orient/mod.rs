@@ -85,7 +85,8 @@ pub struct Orientation {
     pub heading: Option<f64>,
     pub method: &'static str,
     /// Degrees the symmetry plane turned the estimator's heading (see [`refine_heading`]);
-    /// `None` when the heading was given or the cloud showed no symmetry near it.
+    /// `None` when the heading was given, the cloud showed no symmetry near it, or its flat
+    /// flanks kept the footprint axis (see [`FLAT_FLANKS`]).
     pub refinement: Option<f64>,
 }
 

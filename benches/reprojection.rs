@@ -1,19 +1,16 @@
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use mvpcc::camera::{Camera, DEFAULT_VIEWS};
 use mvpcc::filter::{inliers, SorParams};
 use mvpcc::projection::project;
-use mvpcc::reprojection::{reproject, ReprojectOptions};
+use mvpcc::reprojection::{reproject, snap_to_rays, ReprojectOptions};
 
 mod common;
 
 fn reprojection(c: &mut Criterion) {
     // Dense views like an inpainted ground truth: a densely sampled object fills its silhouette.
     let dense = common::normalized_car(600_000, 2);
-    let views = project(
-        &dense.positions_f32(),
-        dense.colors.as_deref(),
-        &Camera::set(&DEFAULT_VIEWS, 256).unwrap(),
-    );
+    let cameras = Camera::set(&DEFAULT_VIEWS, 256).unwrap();
+    let views = project(&dense.positions_f32(), dense.colors.as_deref(), &cameras);
     let options = ReprojectOptions::default();
     let merged = reproject(&views, options);
     eprintln!(
@@ -25,6 +22,13 @@ fn reprojection(c: &mut Criterion) {
     group.sample_size(20);
     group.bench_function("erode + merge + dedup, 4 dense views of 256²", |b| {
         b.iter(|| reproject(&views, options))
+    });
+    group.bench_function("snap onto pixel rays, 4 dense views of 256²", |b| {
+        b.iter_batched_ref(
+            || views.clone(),
+            |v| snap_to_rays(v, &cameras),
+            BatchSize::LargeInput,
+        )
     });
     group.bench_function("erode + merge + dedup + SOR, 4 dense views of 256²", |b| {
         b.iter(|| {

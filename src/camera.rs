@@ -122,6 +122,15 @@ impl Camera {
         })
     }
 
+    /// The point at `p`'s depth (its distance along the optical axis) on the ray through the
+    /// centre of pixel (`row`, `col`).
+    pub fn on_ray(&self, row: usize, col: usize, p: [f64; 3]) -> [f64; 3] {
+        let depth = (self.rotation * Vector3::from(p) + self.translation)[2];
+        let at = |pixel: usize| (pixel as f64 + 0.5 - self.principal) / self.focal * depth;
+        let q = Vector3::new(at(col), at(row), depth);
+        (self.rotation.transpose() * (q - self.translation)).into()
+    }
+
     /// The f32 projector the hot loop uses.
     pub fn projector(&self) -> Projector {
         let r = self.rotation.map(|v| v as f32);
@@ -286,6 +295,25 @@ mod tests {
         let (row_low, _, _) = p.project([0.0, -0.4, 0.0]).unwrap();
         let (row_high, _, _) = p.project([0.0, 0.4, 0.0]).unwrap();
         assert!(row_high < row_low);
+    }
+
+    #[test]
+    fn a_point_moved_onto_its_pixels_ray_keeps_its_depth() {
+        let cam = Camera::rig(6, 64).unwrap();
+        let p = [0.1, -0.2, 0.05];
+        let (row, col, depth) = cam.projector().project(p.map(|v| v as f32)).unwrap();
+        let centred = cam.on_ray(row, col, p);
+        let c = cam.rotation * Vector3::from(centred) + cam.translation;
+        assert!((c[2] - depth as f64).abs() < 1e-5);
+        assert!((cam.focal * c[0] / c[2] + cam.principal - (col as f64 + 0.5)).abs() < 1e-9);
+        assert!((cam.focal * c[1] / c[2] + cam.principal - (row as f64 + 0.5)).abs() < 1e-9);
+        assert!((Vector3::from(centred) - Vector3::from(p)).norm() < c[2] / cam.focal);
+        // Already on its ray: unmoved. The next pixel's ray at that depth: one pixel across.
+        let again = cam.on_ray(row, col, centred);
+        assert!((Vector3::from(again) - Vector3::from(centred)).norm() < 1e-12);
+        let next = cam.on_ray(row, col + 1, centred);
+        let step = (Vector3::from(next) - Vector3::from(centred)).norm();
+        assert!((step - c[2] / cam.focal).abs() < 1e-12);
     }
 
     #[test]

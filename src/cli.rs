@@ -250,10 +250,14 @@ pub struct CompleteArgs {
     /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
     #[arg(long, default_value_t = 0)]
     pub smooth: usize,
+    /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray
+    /// at the predicted depth.
+    #[arg(long)]
+    pub no_snap: bool,
     #[command(flatten)]
     pub sor: SorOptions,
     /// A completed point within this many model pixels of a measured one is not added.
-    #[arg(long, default_value_t = 8.0)]
+    #[arg(long, default_value_t = 4.0)]
     pub merge_pixels: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "input_dir")]

@@ -15,7 +15,7 @@ use crate::frame::{Frame, FrameError, UpAxis};
 use crate::inpaint::{InpaintError, Inpainter};
 use crate::knn::KnnIndex;
 use crate::projection::project;
-use crate::reprojection::{reproject, ReprojectOptions};
+use crate::reprojection::{reproject, snap_to_rays, ReprojectOptions};
 use crate::symmetry::{find_plane, mirror, Plane};
 use nalgebra::{Matrix3, SymmetricEigen};
 use serde::Serialize;
@@ -55,6 +55,8 @@ pub struct Options {
     pub erode: usize,
     /// Median window side over the inpainted views' XYZ.
     pub smooth: usize,
+    /// Move each inpainted pixel's XYZ onto its pixel's ray (see [`snap_to_rays`]).
+    pub snap: bool,
     pub sor: SorParams,
     /// Keep the measured points and add completed points where they are missing; otherwise
     /// the output is the network's re-projected cloud alone (the paper's output).
@@ -76,9 +78,10 @@ impl Default for Options {
             views: crate::camera::DEFAULT_VIEWS.to_vec(),
             erode: 3,
             smooth: 0,
+            snap: true,
             sor: SorParams::default(),
             keep_input: true,
-            merge_pixels: 8.0,
+            merge_pixels: 4.0,
             symmetry: true,
         }
     }
@@ -228,7 +231,10 @@ pub fn complete(
         timings.decoder = stages.decoder;
 
         let start = Instant::now();
-        let inpainted = out.pop().expect("one object in, one out");
+        let mut inpainted = out.pop().expect("one object in, one out");
+        if options.snap {
+            snap_to_rays(&mut inpainted, &cameras);
+        }
         let predicted = reproject(
             &inpainted,
             ReprojectOptions {

@@ -96,12 +96,16 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
     let f = flags(&out);
     assert!(f[..n].iter().all(|&v| v == 0.0));
     assert!(f[n..].iter().all(|&v| v == 1.0));
-    // The frame is restored: the untrained model puts points anywhere in the model's box, a
-    // cube one car length (4.4 m) on a side around the car, so within 2.2 m of the scan's box,
-    // not near the origin 650 km away.
+    // The frame is restored: the added points are near the scan, not near the origin 650 km
+    // away. The untrained model puts points anywhere in the model's box, a cube one car length
+    // (4.4 m) on a side around the car; snapped onto the 64² rig cameras' pixel rays at depths
+    // within that box they stay within 1.4 box sides of its centre (6.2 m).
     let reach = overshoot(&out.positions[n..], &out.positions[..n]);
-    assert!(reach < 2.2, "added points reach {reach} m beyond the scan");
-    let far_flank = out.positions[n..]
+    assert!(reach < 6.2, "added points reach {reach} m beyond the scan");
+    // The mirror images come first among the added points; the network's follow them.
+    let mirrored = report["mirrored"].as_u64().unwrap() as usize;
+    assert!(mirrored > 0);
+    let far_flank = out.positions[n..n + mirrored]
         .iter()
         .map(|p| p[0] - 650_123.25)
         .fold(f64::MAX, f64::min);
@@ -178,7 +182,20 @@ fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
         .success();
     let alone = read_cloud(&alone, None).unwrap().cloud;
     assert!(flags(&alone).iter().all(|&v| v == 1.0));
-    assert!(overshoot(&alone.positions, &input_cloud.positions) < 2.2);
+    assert!(overshoot(&alone.positions, &input_cloud.positions) < 6.2);
+
+    // Unsnapped, the points sit where the network put them, off their pixels' rays but inside
+    // the model's box: within half a car length of the scan's box.
+    let unsnapped = dir.path().join("unsnapped.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&unsnapped), "--model", s(&model)])
+        .args(["--no-keep-input", "--erode", "0", "--no-snap"])
+        .assert()
+        .success();
+    let unsnapped = read_cloud(&unsnapped, None).unwrap().cloud;
+    assert!(!unsnapped.is_empty());
+    assert_ne!(unsnapped.positions, alone.positions);
+    assert!(overshoot(&unsnapped.positions, &input_cloud.positions) < 2.2);
 }
 
 #[test]

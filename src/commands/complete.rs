@@ -113,6 +113,7 @@ fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
         views: args.views.0.clone(),
         erode: args.erode,
         smooth: args.smooth,
+        snap: !args.no_snap,
         sor: SorParams {
             k: args.sor.sor_k,
             std_mul: args.sor.sor_std,

@@ -138,7 +138,9 @@ fn score_cloud(points: &[[f64; 3]], gt: &[[f64; 3]]) -> Cloud3d {
 }
 
 /// The completed cloud of inpainted views: re-projected with the default 3×3 erosion, then
-/// filtered (20 neighbours, σ = 5), as `complete` makes it.
+/// filtered (20 neighbours, σ = 5), as `complete --no-snap --no-keep-input` makes it. The XYZ
+/// stay as the network predicts them: these scores end stages and pick the best checkpoint, and
+/// the recorded training recipe (README, *The default model*) was run with them so.
 pub fn completed_cloud(views: &ViewImages) -> Vec<[f64; 3]> {
     let cloud = reproject(views, ReprojectOptions::default());
     let keep = inliers(&cloud.positions, SorParams::default());

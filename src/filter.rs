@@ -82,20 +82,12 @@ mod tests {
             .collect()
     }
 
-    /// A deterministic pseudo-random generator, so failures reproduce.
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
-    }
-
     #[test]
     fn matches_brute_force_with_ties_duplicates_and_outliers() {
-        let mut seed = 7;
+        let mut rng = crate::shapes::Lcg::new(7);
         for trial in 0..6 {
             let mut points: Vec<[f64; 3]> = (0..400)
-                .map(|_| [lcg(&mut seed), lcg(&mut seed), lcg(&mut seed) * 0.1])
+                .map(|_| [rng.next_f64(), rng.next_f64(), rng.next_f64() * 0.1])
                 .collect();
             // Exact duplicates, grid points with tied distances, and far outliers.
             for i in 0..40 {
@@ -107,7 +99,7 @@ mod tests {
                 }
             }
             for i in 0..8 {
-                points.push([3.0 + i as f64 * (1.0 + lcg(&mut seed)), -2.0, 1.0]);
+                points.push([3.0 + i as f64 * (1.0 + rng.next_f64()), -2.0, 1.0]);
             }
             let params = SorParams {
                 k: [1, 5, 20, 20, 50, 8][trial],
@@ -125,14 +117,14 @@ mod tests {
     #[test]
     fn matches_brute_force_on_a_scan_sized_surface() {
         // Large enough for the grid search, with scan-line density changes and outliers.
-        let mut seed = 5;
+        let mut rng = crate::shapes::Lcg::new(5);
         let mut points: Vec<[f64; 3]> = (0..6000)
             .map(|i| {
                 let line = (i % 60) as f64 / 60.0;
                 [
-                    lcg(&mut seed),
-                    0.3 * line + 0.002 * lcg(&mut seed),
-                    0.2 * lcg(&mut seed),
+                    rng.next_f64(),
+                    0.3 * line + 0.002 * rng.next_f64(),
+                    0.2 * rng.next_f64(),
                 ]
             })
             .collect();

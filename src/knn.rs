@@ -327,13 +327,8 @@ mod tests {
 
     #[test]
     fn grid_search_is_exact_on_surfaces_with_outliers_and_duplicates() {
-        let mut seed = 11u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::shapes::Lcg::new(11);
+        let mut rnd = || rng.next_f64();
         // A curved sheet, a dense blob, duplicates and a few far points.
         let mut points: Vec<[f64; 3]> = (0..6000)
             .map(|_| {

@@ -341,11 +341,8 @@ mod tests {
 
     #[test]
     fn dedup_matches_brute_force_on_random_points() {
-        let mut seed = 3u64;
-        let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 0.01 - 0.005
-        };
+        let mut rng = crate::shapes::Lcg::new(3);
+        let mut next = || rng.range(-0.005, 0.005);
         let pts: Vec<[f64; 3]> = (0..3000).map(|_| [next(), next(), next()]).collect();
         let tol = 5e-4;
         let mut want: Vec<usize> = Vec::new();

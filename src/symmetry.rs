@@ -430,13 +430,8 @@ mod tests {
 
     #[test]
     fn the_grid_finds_what_a_search_of_every_point_finds() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = crate::shapes::Lcg::new(7);
+        let mut next = || rng.range(-0.5, 0.5);
         let points: Vec<[f64; 3]> = (0..3000).map(|_| [next(), 0.3 * next(), next()]).collect();
         let distance = 0.03;
         let grid = MatchGrid::new(&points, distance);

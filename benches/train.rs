@@ -5,12 +5,12 @@
 //! `MVPCC_BENCH_PAPER=1` adds the paper's shape (minutes per sample).
 
 use burn::optim::{AdamConfig, GradientsParams};
-use burn::tensor::{Device, Distribution, Tensor};
+use burn::tensor::Device;
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::camera::{Camera, DEFAULT_VIEWS};
 use mvpcc::model::gan::{Batch, Gan, GanOptimConfig};
-use mvpcc::model::loss::{smooth_l1, LossWeights, Target};
-use mvpcc::model::{ModelConfig, Preset};
+use mvpcc::model::loss::{smooth_l1, LossWeights};
+use mvpcc::model::Preset;
 use mvpcc::shapes::{example_car_views, Lcg};
 use mvpcc::train::dataset::{load_sample, AugmentSettings, Cache, SampleRef};
 use mvpcc::views::write_views;
@@ -24,19 +24,6 @@ fn presets() -> Vec<Preset> {
     p
 }
 
-fn batch(config: &ModelConfig, device: &Device) -> Batch {
-    let (v, c, s) = (config.views, config.channels.count(), config.size);
-    let occupancy = Tensor::<5>::random([1, v, 1, s, s], Distribution::Bernoulli(0.4), device);
-    let images =
-        Tensor::<5>::random([1, v, c, s, s], Distribution::Default, device) * occupancy.clone();
-    let seen =
-        occupancy.clone() * Tensor::random([1, v, 1, s, s], Distribution::Bernoulli(0.5), device);
-    Batch {
-        input: Tensor::cat(vec![images.clone() * seen.clone(), seen], 2),
-        target: Target { images, occupancy },
-    }
-}
-
 fn training_step(c: &mut Criterion) {
     let device = Device::flex().autodiff();
     let mut group = c.benchmark_group("training step (flex, 1 object)");
@@ -46,7 +33,7 @@ fn training_step(c: &mut Criterion) {
     for preset in presets() {
         let config = preset.config();
         let name = format!("{preset:?}").to_lowercase();
-        let data = batch(&config, &device);
+        let data = Batch::random(&config, 1, &device);
 
         let mut generator = Some(config.init_generator(&device).unwrap());
         let mut adam = AdamConfig::new().with_beta_1(0.0).with_beta_2(0.9).init();

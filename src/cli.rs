@@ -8,7 +8,7 @@ use crate::device::DeviceChoice;
 use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
 use crate::mesh::SignedAxis;
-use crate::model::{Channels, ModelConfig, Padding, Preset};
+use crate::model::{Channels, Formulation, ModelConfig, Padding, Preset};
 use crate::orient::OrientMode;
 use crate::scan::PartialKinds;
 use crate::synth::Category;
@@ -52,7 +52,7 @@ pub enum Command {
     Synth(SynthArgs),
     /// Train the inpainting GAN on a "shapenet-views" directory (from `mvpcc prepare` or the
     /// original MVPCC data).
-    Train(TrainArgs),
+    Train(Box<TrainArgs>),
     /// Train the orientation network (the paper's STN) on the partial samples of a
     /// "shapenet-views" directory turned by random yaws.
     TrainOrient(TrainOrientArgs),
@@ -357,12 +357,23 @@ pub struct ProfileArgs {
     pub channels: Option<Channels>,
     #[arg(long, value_enum)]
     pub padding: Option<Padding>,
-    /// Objects per forward pass.
+    /// Objects per forward pass (per training step with --train).
     #[arg(long, default_value_t = 1)]
     pub batch: usize,
-    /// Timed forward passes, after one untimed warm-up; the layer breakdown takes as many more.
+    /// Time whole GAN training steps (both networks' forward, backward and Adam updates, every
+    /// loss term) instead of the generator's forward.
+    #[arg(long)]
+    pub train: bool,
+    /// How layers with two formulations run: sliced on the CPU and plain elsewhere (auto), or
+    /// one of them everywhere, to measure one against the other.
+    #[arg(long, value_enum, default_value_t = Formulation::Auto)]
+    pub layers: Formulation,
+    /// Timed runs; the per-layer or per-phase breakdown takes as many more.
     #[arg(long, default_value_t = 5)]
     pub runs: usize,
+    /// Untimed runs first: GPU autotuning benchmarks each new kernel shape in them.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
     /// Print the results as JSON.
     #[arg(long)]
     pub json: bool,
@@ -503,6 +514,18 @@ pub struct TrainArgs {
     /// model config (as a run's config.json) [default: default].
     #[arg(long)]
     pub config: Option<String>,
+    /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
+    /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
+    /// a folder holding model.safetensors and discriminator.safetensors (as assets/). The model
+    /// config is the weights' own unless --config gives one; only --size may differ from it.
+    #[arg(long, conflicts_with = "resume")]
+    pub init: Option<PathBuf>,
+    /// The discriminator's weights to start from with --init, over the one --init finds.
+    #[arg(long, requires = "init")]
+    pub init_discriminator: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// Objects per micro-batch [default: 4].

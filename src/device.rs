@@ -1,15 +1,20 @@
-//! Where the network runs: Burn's flex backend on the CPU, or a GPU through wgpu when mvpcc is
-//! built with `--features wgpu`. Asking for a GPU never fails: without one (or with only a
-//! software rasterizer, which is tens of times slower than flex) the CPU is used and the
-//! returned notice says why.
+//! Where the network runs: Burn's flex backend on the CPU, CUDA when mvpcc is built with
+//! `--features cuda`, or any GPU through wgpu with `--features wgpu`. `--device gpu` never
+//! fails: it takes CUDA when the build has it and a CUDA device answers, else wgpu, else the
+//! CPU, and the returned notice says why. `--device cuda|wgpu` is an explicit pick and fails with
+//! one line when that backend cannot run here.
 
 use burn::tensor::Device;
 use clap::ValueEnum;
+use thiserror::Error;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DeviceChoice {
     Cpu,
+    /// The fastest GPU backend that answers (CUDA, then wgpu), else the CPU with a warning.
     Gpu,
+    Cuda,
+    Wgpu,
 }
 
 /// An opened device and a one-line description of it for the log.
@@ -20,45 +25,106 @@ pub struct Opened {
     pub fallback: Option<String>,
 }
 
-pub fn open(choice: DeviceChoice) -> Opened {
-    let cpu = |fallback| Opened {
-        device: Device::flex(),
-        description: format!("CPU (flex, {} threads)", rayon::current_num_threads()),
-        fallback,
+#[derive(Debug, Error)]
+#[error("--device {backend}: {why}")]
+pub struct DeviceError {
+    backend: &'static str,
+    why: String,
+}
+
+pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
+    let explicit = |backend, opened: Result<(Device, String), String>| {
+        opened
+            .map(|(device, description)| Opened {
+                device,
+                description,
+                fallback: None,
+            })
+            .map_err(|why| DeviceError { backend, why })
     };
     match choice {
-        DeviceChoice::Cpu => cpu(None),
-        DeviceChoice::Gpu => match open_gpu() {
-            Ok((device, name)) => Opened {
-                device,
-                description: format!("GPU ({name}, wgpu)"),
-                fallback: None,
-            },
-            Err(why) => cpu(Some(format!("{why}; running on the CPU"))),
-        },
+        DeviceChoice::Cpu => Ok(cpu(None)),
+        DeviceChoice::Cuda => explicit("cuda", open_cuda()),
+        DeviceChoice::Wgpu => explicit("wgpu", open_wgpu()),
+        DeviceChoice::Gpu => Ok(open_any_gpu()),
     }
 }
 
+fn cpu(fallback: Option<String>) -> Opened {
+    Opened {
+        device: Device::flex(),
+        description: format!("CPU (flex, {} threads)", rayon::current_num_threads()),
+        fallback,
+    }
+}
+
+fn open_any_gpu() -> Opened {
+    let cuda = match open_cuda() {
+        Ok((device, description)) => {
+            return Opened {
+                device,
+                description,
+                fallback: None,
+            }
+        }
+        Err(why) => why,
+    };
+    match open_wgpu() {
+        Ok((device, description)) => Opened {
+            device,
+            description,
+            fallback: None,
+        },
+        Err(wgpu) => cpu(Some(format!("{cuda}; {wgpu}; running on the CPU"))),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn open_cuda() -> Result<(Device, String), String> {
+    use burn::tensor::DeviceType;
+    let device = Device::enumerate(DeviceType::Cuda)
+        .into_vec()
+        .into_iter()
+        .next()
+        .ok_or_else(|| "no CUDA device answers (no NVIDIA driver or no GPU)".to_string())?;
+    let name = device
+        .identity()
+        .map_or_else(|| "unnamed CUDA device".to_string(), |i| i.name);
+    Ok((device, format!("GPU ({name}, CUDA)")))
+}
+
+#[cfg(not(feature = "cuda"))]
+fn open_cuda() -> Result<(Device, String), String> {
+    Err("this mvpcc was built without CUDA (cargo feature `cuda`)".to_string())
+}
+
 #[cfg(feature = "wgpu")]
-fn open_gpu() -> Result<(Device, String), String> {
+fn open_wgpu() -> Result<(Device, String), String> {
     let device = Device::wgpu_options()
         .init()
-        .map_err(|e| format!("no usable GPU adapter ({e})"))?;
+        .map_err(|e| format!("no usable wgpu adapter ({e})"))?;
     let identity = device.identity();
     let name = identity
         .as_ref()
         .map_or_else(|| "unnamed adapter".to_string(), |i| i.name.clone());
     if is_software_adapter(&name, identity.is_some_and(|i| i.physical.is_none())) {
         return Err(format!(
-            "the only GPU adapter is the software rasterizer {name}"
+            "the only wgpu adapter is the software rasterizer {name}"
         ));
     }
-    Ok((device, name))
+    Ok((device, format!("GPU ({name}, wgpu)")))
 }
 
 #[cfg(not(feature = "wgpu"))]
-fn open_gpu() -> Result<(Device, String), String> {
-    Err("this mvpcc was built without GPU support (cargo feature `wgpu`)".to_string())
+fn open_wgpu() -> Result<(Device, String), String> {
+    Err("this mvpcc was built without wgpu (cargo feature `wgpu`)".to_string())
+}
+
+/// Whether tensors on `device` run on flex, Burn's CPU backend: layers pick their CPU or GPU
+/// formulation by this (see [`crate::model`]'s layers), so weights stay device-independent.
+pub fn is_cpu(device: &Device) -> bool {
+    // Device equality ignores autodiff.
+    *device == Device::flex()
 }
 
 /// llvmpipe, lavapipe and SwiftShader present themselves as GPUs but run on the CPU.
@@ -77,12 +143,27 @@ mod tests {
 
     #[test]
     fn asking_for_a_gpu_always_yields_a_device() {
-        let opened = open(DeviceChoice::Gpu);
+        let opened = open(DeviceChoice::Gpu).unwrap();
         if opened.fallback.is_some() {
             assert!(opened.description.starts_with("CPU"));
+            assert!(is_cpu(&opened.device));
         }
         let x = burn::tensor::Tensor::<1>::ones([3], &opened.device).sum();
         assert_eq!(x.into_data().try_into_vec::<f32>().unwrap(), vec![3.0]);
+    }
+
+    #[cfg(not(feature = "cuda"))]
+    #[test]
+    fn an_explicit_backend_the_build_lacks_is_an_error_naming_it() {
+        let e = open(DeviceChoice::Cuda).err().unwrap().to_string();
+        assert!(e.starts_with("--device cuda: "), "{e}");
+        assert!(e.contains("feature `cuda`"), "{e}");
+    }
+
+    #[test]
+    fn the_cpu_is_recognized_with_and_without_autodiff() {
+        assert!(is_cpu(&Device::flex()));
+        assert!(is_cpu(&Device::flex().autodiff()));
     }
 
     #[test]

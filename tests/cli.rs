@@ -456,7 +456,20 @@ fn profile_reports_a_median_and_a_breakdown() {
     // A CPU-only build asked for a GPU says so once on stderr and goes on.
     let stderr = String::from_utf8(out.stderr.clone()).unwrap();
     if !cfg!(feature = "wgpu") {
-        assert!(stderr.contains("warning: this mvpcc was built without GPU support"));
+        assert!(stderr.contains(
+            "warning: this mvpcc was built without CUDA (cargo feature `cuda`); this mvpcc was \
+             built without wgpu (cargo feature `wgpu`); running on the CPU"
+        ));
+    }
+    // Asked for one backend it lacks, it stops with one line.
+    if !cfg!(feature = "cuda") {
+        mvpcc()
+            .args(["profile", "--config", "tiny", "--device", "cuda"])
+            .assert()
+            .failure()
+            .stderr(
+                "error: --device cuda: this mvpcc was built without CUDA (cargo feature `cuda`)\n",
+            );
     }
 
     let json = mvpcc()
@@ -470,8 +483,55 @@ fn profile_reports_a_median_and_a_breakdown() {
     let json: serde_json::Value = serde_json::from_slice(&json).unwrap();
     assert_eq!(json["config"]["channels"], "xyz");
     assert_eq!(json["config"]["views"], 2);
-    assert!(json["forward_ms_median"].as_f64().unwrap() > 0.0);
-    assert!(json["layers_ms"].get("reflect pad").is_none());
+    assert_eq!(json["measured"], "forward");
+    assert!(json["median_ms"].as_f64().unwrap() > 0.0);
+    let parts: Vec<&str> = json["breakdown"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(
+        parts.contains(&"conv 7x7") && !parts.contains(&"reflect pad"),
+        "{parts:?}"
+    );
+}
+
+#[test]
+fn profile_train_times_whole_gan_steps_phase_by_phase() {
+    let out = mvpcc()
+        .args(["profile", "--config", "tiny", "--train", "--batch", "2"])
+        .args(["--runs", "1", "--warmup", "0", "--layers", "plain"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let stdout = String::from_utf8(out).unwrap();
+    let last = stdout.lines().last().unwrap();
+    let ms: f64 = last
+        .strip_prefix("train_step_ms_median=")
+        .unwrap_or_else(|| panic!("last line {last:?}"))
+        .parse()
+        .unwrap();
+    assert!(ms > 0.0);
+    let phases: Vec<&str> = stdout
+        .lines()
+        .skip(1)
+        .take(6)
+        .map(|l| l.split("  ").next().unwrap())
+        .collect();
+    assert_eq!(
+        phases,
+        [
+            "generator forward",
+            "discriminator forward + loss",
+            "discriminator backward",
+            "generator losses",
+            "generator backward",
+            "Adam updates"
+        ]
+    );
 }
 
 #[test]

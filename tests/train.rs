@@ -140,6 +140,9 @@ fn a_run_writes_its_files_and_resumes_exactly() {
         "best/generator.safetensors",
         "samples/00000003.png",
         "samples/00000006.png",
+        // A run ended by --steps validates its last step too.
+        "samples/00000008.png",
+        "discriminator.safetensors",
     ] {
         assert!(whole.join(file).is_file(), "{file} missing");
     }
@@ -151,17 +154,11 @@ fn a_run_writes_its_files_and_resumes_exactly() {
         .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["kind"].to_string())
         .collect();
     assert_eq!(kinds.iter().filter(|k| *k == "\"train\"").count(), 4);
-    assert_eq!(kinds.iter().filter(|k| *k == "\"validation\"").count(), 2);
+    assert_eq!(validated_steps(&whole), [3, 6, 8]);
     assert_eq!(kinds[0], "\"baseline\"");
-    // The resumed run's log holds no line twice.
-    let split_log = std::fs::read_to_string(split.join("log.jsonl")).unwrap();
-    assert_eq!(
-        split_log
-            .lines()
-            .filter(|l| l.contains("\"validation\""))
-            .count(),
-        2
-    );
+    // The resumed run's log holds no line twice, and the validation of the step it was stopped
+    // at (5) did not change what it went on to compute (compared above).
+    assert_eq!(validated_steps(&split), [3, 5, 6, 8]);
     // Checkpoints beyond --keep (3) are pruned: 4 and 8 remain, plus the final one.
     let kept: Vec<String> = std::fs::read_dir(whole.join("checkpoints"))
         .unwrap()
@@ -172,6 +169,53 @@ fn a_run_writes_its_files_and_resumes_exactly() {
         kept.len() <= 3 && kept.contains(&"step-00000008".to_string()),
         "{kept:?}"
     );
+}
+
+/// The steps of a run's validation records, in log order.
+fn validated_steps(run: &Path) -> Vec<u64> {
+    std::fs::read_to_string(run.join("log.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|r| r["kind"] == "validation")
+        .map(|r| r["step"].as_u64().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (first, second) = (dir.path().join("first"), dir.path().join("second"));
+    train(&first, 2, &[]).assert().success();
+    // No --config: the weights' own; no step: the generator comes out as it went in.
+    base(&second)
+        .args(["--init", s(&first), "--steps", "0", "--val-every", "0"])
+        .assert()
+        .success()
+        .stderr(
+            predicate::str::contains("starting from")
+                .and(predicate::str::contains("discriminator.safetensors")),
+        );
+    assert_eq!(output_of(&first), output_of(&second));
+    let settings = std::fs::read_to_string(second.join("train.json")).unwrap();
+    assert!(settings.contains("generator.safetensors"), "{settings}");
+
+    let third = dir.path().join("third");
+    base(&third)
+        .args(["--init", s(&first.join("generator.safetensors"))])
+        .args(["--config", "small", "--size", "32", "--steps", "1"])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::starts_with("error: ")
+                .and(predicate::str::contains("--init: expected model config"))
+                .and(predicate::str::contains("\n").count(1)),
+        );
+    base(&third)
+        .args(["--init", s(&first), "--resume"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("cannot be used with"));
 }
 
 #[test]

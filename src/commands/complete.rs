@@ -56,7 +56,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
 
 /// The generator from `--model` (a weights file or a run directory) or the built-in one.
 fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Result<Inpainter> {
-    let opened = open(device);
+    let opened = open(device)?;
     if let Some(why) = &opened.fallback {
         log.warn(why);
     }

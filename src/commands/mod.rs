@@ -28,7 +28,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Profile(args) => profile::run(args, log),
         Command::Prepare(args) => prepare::run(args, log),
         Command::Synth(args) => synth::run(args, log),
-        Command::Train(args) => train::run(args, log),
+        Command::Train(args) => train::run(*args, log),
         Command::TrainOrient(args) => train_orient::run(args, log),
     }
 }

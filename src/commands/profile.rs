@@ -1,32 +1,77 @@
-//! `mvpcc profile`: times the generator's forward pass on random input and breaks it down by
-//! layer kind, so a user can pick a model shape and device, and anyone can reproduce the
-//! speed figures in the README.
+//! `mvpcc profile`: times the generator's forward pass, or with `--train` whole GAN training
+//! steps, on random input and breaks the time down by layer kind or step phase, so a user can
+//! pick a model shape and device, and anyone can reproduce the speed figures in docs/speed.md.
 
 use super::Log;
 use crate::cli::ProfileArgs;
 use crate::device::open;
+use crate::model::gan::{Batch, Gan, GanOptimConfig, StepClock, StepPhase};
+use crate::model::loss::LossWeights;
 use crate::model::{LayerKind, ModelConfig, Probe};
 use anyhow::Context;
 use burn::tensor::{Device, Distribution, Tensor};
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
+
+/// What `--json` prints.
+#[derive(Debug, Serialize)]
+struct Report {
+    config: ModelConfig,
+    device: String,
+    /// `forward` or `train_step`.
+    measured: &'static str,
+    batch: usize,
+    runs: usize,
+    warmup: usize,
+    /// Generator forward GFLOP for the batch.
+    gflop: f64,
+    median_ms: f64,
+    all_ms: Vec<f64>,
+    /// Layer kinds (forward) or step phases (`--train`, in the order they run), each timed
+    /// with a device sync after it.
+    breakdown: Vec<Part>,
+}
+
+#[derive(Debug, Serialize)]
+struct Part {
+    name: &'static str,
+    ms: f64,
+}
 
 pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
     let config = args.model_config();
     config.validate().context("model config")?;
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
-    let opened = open(args.device);
+    let opened = open(args.device)?;
     if let Some(why) = &opened.fallback {
         log.warn(why);
     }
-    let device = opened.device;
+    args.layers.set();
     log.info(format!(
-        "profiling {:?} on {}: {}",
+        "profiling {} of {:?} on {}: {}, batch {}, {:?} layers",
+        if args.train {
+            "training steps"
+        } else {
+            "the forward"
+        },
         args.config,
         opened.description,
-        describe(&config)
+        describe(&config),
+        args.batch,
+        args.layers,
     ));
+    let mut report = if args.train {
+        train_steps(&args, &config, opened.device)?
+    } else {
+        forwards(&args, &config, opened.device)?
+    };
+    report.device = opened.description;
+    print(&report, args.json)
+}
+
+fn forwards(args: &ProfileArgs, config: &ModelConfig, device: Device) -> anyhow::Result<Report> {
     let generator = config.init_generator(&device)?;
     let shape = [
         args.batch,
@@ -36,7 +81,7 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
         config.size,
     ];
     let input = Tensor::<5>::random(shape, Distribution::Default, &device);
-    let forward = |probe: &mut TimingProbe| -> anyhow::Result<Duration> {
+    let forward = |probe: &mut Booked<LayerKind>| -> anyhow::Result<Duration> {
         let start = Instant::now();
         let out = generator.forward_probed(input.clone(), probe);
         // Reading one value back waits for every queued kernel on any backend.
@@ -44,57 +89,110 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
         device.sync().context("device")?;
         Ok(start.elapsed())
     };
+    measure(args, config, "forward", &device, forward)
+}
 
-    forward(&mut TimingProbe::off(&device))?;
+fn train_steps(args: &ProfileArgs, config: &ModelConfig, device: Device) -> anyhow::Result<Report> {
+    let device = device.autodiff();
+    let gan = Gan::new(
+        config.clone(),
+        LossWeights::new(),
+        GanOptimConfig::new(),
+        &device,
+    )?;
+    let micro = [Batch::random(config, args.batch, &device)];
+    let mut gan = Some(gan);
+    let step = |clock: &mut Booked<StepPhase>| -> anyhow::Result<Duration> {
+        let start = Instant::now();
+        let (next, losses) = gan
+            .take()
+            .expect("the networks come back from each step")
+            .step_clocked(&micro, 1e-4, clock);
+        gan = Some(next);
+        // The losses are read back as numbers inside the step: it has finished on the device.
+        device.sync().context("device")?;
+        anyhow::ensure!(
+            losses.first_non_finite().is_none(),
+            "a loss is not finite: {losses:?}"
+        );
+        Ok(start.elapsed())
+    };
+    measure(args, config, "train_step", &device, step)
+}
+
+/// Warm-up, `runs` timed runs without syncs inside, then `runs` more booking each part.
+fn measure<K: Ord + Copy + Named>(
+    args: &ProfileArgs,
+    config: &ModelConfig,
+    measured: &'static str,
+    device: &Device,
+    mut run: impl FnMut(&mut Booked<K>) -> anyhow::Result<Duration>,
+) -> anyhow::Result<Report> {
+    for _ in 0..args.warmup {
+        run(&mut Booked::off(device))?;
+    }
     let mut totals = Vec::with_capacity(args.runs);
     for _ in 0..args.runs {
-        totals.push(forward(&mut TimingProbe::off(&device))?);
+        totals.push(run(&mut Booked::off(device))?);
     }
-    let mut by_kind = TimingProbe::on(&device);
+    let mut parts = Booked::on(device);
     for _ in 0..args.runs {
-        forward(&mut by_kind)?;
+        device.sync().context("device")?;
+        parts.last = Instant::now();
+        run(&mut parts)?;
     }
-    let median_ms = median(&mut totals).as_secs_f64() * 1e3;
-    let gflop = config.generator_gflop() * args.batch as f64;
-    let layers: Vec<(LayerKind, f64)> = by_kind
-        .spent
-        .iter()
-        .map(|(&kind, &t)| (kind, t.as_secs_f64() * 1e3 / args.runs as f64))
-        .collect();
-    let profiled_ms: f64 = layers.iter().map(|(_, ms)| ms).sum();
+    let ms = |t: Duration| t.as_secs_f64() * 1e3;
+    Ok(Report {
+        config: config.clone(),
+        device: String::new(),
+        measured,
+        batch: args.batch,
+        runs: args.runs,
+        warmup: args.warmup,
+        gflop: config.generator_gflop() * args.batch as f64,
+        median_ms: ms(median(&mut totals.clone())),
+        all_ms: totals.into_iter().map(ms).collect(),
+        breakdown: parts
+            .spent
+            .iter()
+            .map(|(k, &t)| Part {
+                name: k.name(),
+                ms: ms(t) / args.runs as f64,
+            })
+            .collect(),
+    })
+}
 
-    if args.json {
-        let json = serde_json::json!({
-            "config": serde_json::to_value(&config)?,
-            "device": opened.description,
-            "batch": args.batch,
-            "runs": args.runs,
-            "gflop": gflop,
-            "forward_ms_median": median_ms,
-            "forward_ms_all": totals.iter().map(|t| t.as_secs_f64() * 1e3).collect::<Vec<_>>(),
-            "layers_ms": layers.iter().map(|(k, ms)| (k.name(), *ms)).collect::<BTreeMap<_, _>>(),
-        });
-        println!("{}", serde_json::to_string_pretty(&json)?);
+fn print(report: &Report, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
         return Ok(());
     }
-    println!("{:<20} {:>10} {:>7}", "layer kind", "ms", "share");
-    for (kind, ms) in &layers {
+    let part = if report.measured == "forward" {
+        "layer kind"
+    } else {
+        "step phase"
+    };
+    let summed: f64 = report.breakdown.iter().map(|p| p.ms).sum();
+    println!("{part:<30} {:>10} {:>7}", "ms", "share");
+    for Part { name, ms } in &report.breakdown {
         println!(
-            "{:<20} {:>10.1} {:>6.1}%",
-            kind.name(),
-            ms,
-            100.0 * ms / profiled_ms.max(f64::MIN_POSITIVE)
+            "{name:<30} {ms:>10.1} {:>6.1}%",
+            100.0 * ms / summed.max(f64::MIN_POSITIVE)
         );
     }
     println!(
-        "{:<20} {:>10.1}  (layer by layer, with a device sync after each)",
-        "sum", profiled_ms
+        "{:<30} {summed:>10.1}  (part by part, with a device sync after each)",
+        "sum"
     );
-    println!(
-        "{gflop:.1} GFLOP per forward, {:.1} GFLOP/s",
-        gflop / (median_ms / 1e3)
-    );
-    println!("forward_ms_median={median_ms:.1}");
+    if report.measured == "forward" {
+        println!(
+            "{:.1} GFLOP per forward, {:.1} GFLOP/s",
+            report.gflop,
+            report.gflop / (report.median_ms / 1e3)
+        );
+    }
+    println!("{}_ms_median={:.1}", report.measured, report.median_ms);
     Ok(())
 }
 
@@ -116,31 +214,59 @@ fn median(times: &mut [Duration]) -> Duration {
     }
 }
 
-/// Books the time of each layer under its kind; switched off it only passes calls through.
-struct TimingProbe {
-    device: Device,
-    enabled: bool,
-    spent: BTreeMap<LayerKind, Duration>,
+trait Named {
+    fn name(self) -> &'static str;
 }
 
-impl TimingProbe {
-    fn on(device: &Device) -> TimingProbe {
-        TimingProbe {
+impl Named for LayerKind {
+    fn name(self) -> &'static str {
+        LayerKind::name(self)
+    }
+}
+
+impl Named for StepPhase {
+    fn name(self) -> &'static str {
+        StepPhase::name(self)
+    }
+}
+
+/// Books the time of each part (layer kind or step phase) since the previous one; switched off
+/// it only passes calls through.
+struct Booked<K> {
+    device: Device,
+    enabled: bool,
+    last: Instant,
+    spent: BTreeMap<K, Duration>,
+}
+
+impl<K: Ord> Booked<K> {
+    fn on(device: &Device) -> Booked<K> {
+        Booked {
             device: device.clone(),
             enabled: true,
+            last: Instant::now(),
             spent: BTreeMap::new(),
         }
     }
 
-    fn off(device: &Device) -> TimingProbe {
-        TimingProbe {
+    fn off(device: &Device) -> Booked<K> {
+        Booked {
             enabled: false,
-            ..TimingProbe::on(device)
+            ..Booked::on(device)
         }
+    }
+
+    /// Waits for the device, then books the time since the last mark under `part`.
+    fn book(&mut self, part: K) {
+        // A failed sync only loses this part's timing; the run's own sync reports it.
+        let _ = self.device.sync();
+        let now = Instant::now();
+        *self.spent.entry(part).or_default() += now - self.last;
+        self.last = now;
     }
 }
 
-impl Probe for TimingProbe {
+impl Probe for Booked<LayerKind> {
     fn layer<const D: usize>(
         &mut self,
         kind: LayerKind,
@@ -149,12 +275,19 @@ impl Probe for TimingProbe {
         if !self.enabled {
             return run();
         }
-        let start = Instant::now();
-        let out = run();
-        // A failed sync only loses this layer's timing; the final read-back reports it.
         let _ = self.device.sync();
-        *self.spent.entry(kind).or_default() += start.elapsed();
+        self.last = Instant::now();
+        let out = run();
+        self.book(kind);
         out
+    }
+}
+
+impl StepClock for Booked<StepPhase> {
+    fn done(&mut self, phase: StepPhase) {
+        if self.enabled {
+            self.book(phase);
+        }
     }
 }
 

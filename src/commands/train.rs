@@ -8,7 +8,7 @@ use crate::device::open;
 use crate::model::gan::StepLosses;
 use crate::model::{ModelConfig, Preset};
 use crate::train::{
-    train, Job, LogRecord, Monitor, Outcome, TrainSettings, CONFIG_FILE, SETTINGS_FILE,
+    train, InitWeights, Job, LogRecord, Monitor, Outcome, TrainSettings, CONFIG_FILE, SETTINGS_FILE,
 };
 use anyhow::{bail, Context};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -118,9 +118,10 @@ fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {
 /// The settings and model config of the run: from the options on a new run, from the run's
 /// files on `--resume` (options that would change them are refused).
 fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, ModelConfig)> {
-    let fresh_model = |base: ModelConfig| match args.channels {
-        Some(c) => base.with_channels(c),
-        None => base,
+    let fresh_model = |mut base: ModelConfig| {
+        base.channels = args.channels.unwrap_or(base.channels);
+        base.size = args.size.unwrap_or(base.size);
+        base
     };
     let (settings, mut model) = if args.resume {
         let saved: TrainSettings = read_saved(&run.join(SETTINGS_FILE))?;
@@ -142,12 +143,24 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         }
         (settings, model)
     } else {
-        let settings = apply(args, TrainSettings::new(DEFAULT_VIEWS.to_vec()));
-        let model = fresh_model(model_config(args.config.as_deref().unwrap_or("default"))?);
-        (settings, model)
+        let mut settings = apply(args, TrainSettings::new(DEFAULT_VIEWS.to_vec()));
+        settings.init = args
+            .init
+            .as_deref()
+            .map(|path| InitWeights::find(path, args.init_discriminator.clone()))
+            .transpose()?;
+        let base = match (&args.config, &settings.init) {
+            (Some(name), _) => model_config(name)?,
+            (None, Some(init)) => init.config()?,
+            (None, None) => model_config("default")?,
+        };
+        (settings, fresh_model(base))
     };
     model.views = settings.views.len();
     check(&settings, &model)?;
+    if let Some(init) = settings.init.as_ref().filter(|_| !args.resume) {
+        init.check(&model)?;
+    }
     Ok((settings, model))
 }
 
@@ -224,7 +237,7 @@ fn default_run(data: &Path) -> PathBuf {
 pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     let run = args.out.clone().unwrap_or_else(|| default_run(&args.data));
     let (settings, model) = resolve(&args, &run)?;
-    let opened = open(args.device);
+    let opened = open(args.device)?;
     if let Some(why) = &opened.fallback {
         log.warn(why);
     }

@@ -48,7 +48,7 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
         &out.join("train-orient.json"),
         serde_json::to_string_pretty(&settings)?.as_bytes(),
     )?;
-    let opened = open(args.device);
+    let opened = open(args.device)?;
     if let Some(why) = &opened.fallback {
         log.warn(why);
     }

@@ -1,14 +1,15 @@
 //! One adversarial training step with two optimizers, as the original trains: the
 //! discriminator on real views against detached generated ones, then the generator on the
-//! weighted sum of its losses.
+//! weighted sum of its losses. The real views pass through the discriminator once per step.
 
 use super::loss::{discriminator_input, discriminator_loss, generator_losses, LossWeights, Target};
 use super::vgg::Vgg19;
 use super::{ConfigError, Discriminator, Generator, ModelConfig};
 use burn::config::Config;
+use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::tensor::activation::sigmoid;
-use burn::tensor::{Bytes, Device, Tensor};
+use burn::tensor::{Bytes, Device, Distribution, Tensor};
 
 /// Optimizer settings; the defaults are the original's (Adam, β = (0, 0.9), the
 /// discriminator at a tenth of the generator's rate). The generator's rate itself is given to
@@ -41,6 +42,47 @@ pub struct Gan {
     d_optim: ModuleOptimizer,
 }
 
+/// The parts of a training step, in the order they run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum StepPhase {
+    GeneratorForward,
+    /// The discriminator on real and generated views, and its loss.
+    DiscriminatorLoss,
+    DiscriminatorBackward,
+    /// The discriminator on the generated views again (gradients flow to the views, not to the
+    /// discriminator's weights), and every generator loss term.
+    GeneratorLoss,
+    GeneratorBackward,
+    /// Both Adam updates.
+    Optimizers,
+}
+
+impl StepPhase {
+    pub fn name(self) -> &'static str {
+        match self {
+            StepPhase::GeneratorForward => "generator forward",
+            StepPhase::DiscriminatorLoss => "discriminator forward + loss",
+            StepPhase::DiscriminatorBackward => "discriminator backward",
+            StepPhase::GeneratorLoss => "generator losses",
+            StepPhase::GeneratorBackward => "generator backward",
+            StepPhase::Optimizers => "Adam updates",
+        }
+    }
+}
+
+/// Sees a training step's phases end; `mvpcc profile --train` syncs the device and books the
+/// time there. Work is queued asynchronously on a GPU, so without a sync the phases blur.
+pub trait StepClock {
+    fn done(&mut self, phase: StepPhase);
+}
+
+/// The ordinary step: no clock.
+pub struct NoClock;
+
+impl StepClock for NoClock {
+    fn done(&mut self, _phase: StepPhase) {}
+}
+
 /// One batch of inputs and their ground truth.
 ///
 /// # Shapes
@@ -50,6 +92,24 @@ pub struct Gan {
 pub struct Batch {
     pub input: Tensor<5>,
     pub target: Target,
+}
+
+impl Batch {
+    /// Random views shaped like real ones: 40 % of the pixels occupied, half of those seen by
+    /// the partial input; for timing steps, not for learning.
+    pub fn random(config: &ModelConfig, objects: usize, device: &Device) -> Batch {
+        let (v, c, s) = (config.views, config.channels.count(), config.size);
+        let occupancy =
+            Tensor::<5>::random([objects, v, 1, s, s], Distribution::Bernoulli(0.4), device);
+        let images = Tensor::<5>::random([objects, v, c, s, s], Distribution::Default, device)
+            * occupancy.clone();
+        let seen = occupancy.clone()
+            * Tensor::random([objects, v, 1, s, s], Distribution::Bernoulli(0.5), device);
+        Batch {
+            input: Tensor::cat(vec![images.clone() * seen.clone(), seen], 2),
+            target: Target { images, occupancy },
+        }
+    }
 }
 
 /// The losses of one step (averaged over its micro-batches), read back as numbers.
@@ -109,7 +169,17 @@ impl Gan {
     /// Both networks' losses are taken against the discriminator as it was when the step
     /// began, as the original computes its generator loss before the discriminator update.
     /// `learning_rate` is the generator's; the discriminator's is `d_to_g_rate` times that.
-    pub fn step(mut self, micro: &[Batch], learning_rate: f64) -> (Gan, StepLosses) {
+    pub fn step(self, micro: &[Batch], learning_rate: f64) -> (Gan, StepLosses) {
+        self.step_clocked(micro, learning_rate, &mut NoClock)
+    }
+
+    /// [`Gan::step`], telling `clock` as each phase's work has been queued.
+    pub fn step_clocked<C: StepClock>(
+        mut self,
+        micro: &[Batch],
+        learning_rate: f64,
+        clock: &mut C,
+    ) -> (Gan, StepLosses) {
         assert!(!micro.is_empty(), "a step needs at least one batch");
         let share = 1.0 / micro.len() as f64;
         let mut d_grads = GradientsAccumulator::<Discriminator>::new();
@@ -117,23 +187,26 @@ impl Gan {
         let mut sum = StepLosses::default();
         for batch in micro {
             let output = self.generator.forward(batch.input.clone());
+            clock.done(StepPhase::GeneratorForward);
             let target = &batch.target;
             let fake =
                 discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone()))
                     .detach();
-            let real = discriminator_input(target.images.clone(), target.occupancy.clone());
+            // One pass over the real views serves both losses: its logits train the
+            // discriminator, its features (as constants) are what the generator's perceptual
+            // and style terms compare against.
+            let real = self.discriminator.forward(discriminator_input(
+                target.images.clone(),
+                target.occupancy.clone(),
+            ));
+            let real_features: Vec<Tensor<4>> =
+                real.features.iter().map(|f| f.clone().detach()).collect();
             let d_loss = discriminator_loss(
                 self.weights.adversarial_kind,
-                self.discriminator.forward(real).logits,
+                real.logits,
                 self.discriminator.forward(fake).logits,
             );
-            let g = generator_losses(
-                &output,
-                target,
-                &self.discriminator,
-                self.vgg.as_ref(),
-                &self.weights,
-            );
+            clock.done(StepPhase::DiscriminatorLoss);
             d_grads.accumulate(
                 &self.discriminator,
                 GradientsParams::from_grads(
@@ -141,6 +214,19 @@ impl Gan {
                     &self.discriminator,
                 ),
             );
+            clock.done(StepPhase::DiscriminatorBackward);
+            // The generator's loss flows through the discriminator but must not train it: a copy
+            // whose weights record no gradient spares the backward pass their gradients.
+            let judge = self.discriminator.clone().no_grad();
+            let g = generator_losses(
+                &output,
+                target,
+                &judge,
+                &real_features,
+                self.vgg.as_ref(),
+                &self.weights,
+            );
+            clock.done(StepPhase::GeneratorLoss);
             g_grads.accumulate(
                 &self.generator,
                 GradientsParams::from_grads(
@@ -148,6 +234,7 @@ impl Gan {
                     &self.generator,
                 ),
             );
+            clock.done(StepPhase::GeneratorBackward);
             sum = sum.plus(&StepLosses {
                 discriminator: value(d_loss),
                 generator: value(g.total),
@@ -167,6 +254,7 @@ impl Gan {
         self.generator = self
             .g_optim
             .step(learning_rate, self.generator, g_grads.grads());
+        clock.done(StepPhase::Optimizers);
         (self, sum.scaled(share as f32))
     }
 
@@ -272,8 +360,7 @@ impl StepLosses {
 mod tests {
     use super::*;
     use crate::model::{NoProbe, Preset};
-    use burn::module::Module;
-    use burn::tensor::{Distribution, TensorData};
+    use burn::tensor::TensorData;
 
     /// A blob-shaped object: occupied where inside a disc, geometry a smooth ramp.
     fn sample(device: &Device) -> (Tensor<5>, Target) {
@@ -342,6 +429,40 @@ mod tests {
         let x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &Device::flex());
         let out = plain.forward_probed(x, &mut NoProbe);
         assert_eq!(out.images.dims(), [1, 4, 6, 32, 32]);
+    }
+
+    #[test]
+    fn the_generators_loss_gives_gradients_to_the_generator_alone() {
+        let device = Device::flex().autodiff();
+        device.seed(5);
+        let gan = Gan::new(
+            Preset::Tiny.config(),
+            LossWeights::new(),
+            GanOptimConfig::new(),
+            &device,
+        )
+        .unwrap();
+        let (input, target) = sample(&device);
+        let real = gan.discriminator.forward(discriminator_input(
+            target.images.clone(),
+            target.occupancy.clone(),
+        ));
+        let features: Vec<Tensor<4>> = real.features.iter().map(|f| f.clone().detach()).collect();
+        // A backward pass consumes its graph: each count runs the generator anew.
+        let count = |judge: &Discriminator| {
+            let output = gan.generator.forward(input.clone());
+            let g = generator_losses(&output, &target, judge, &features, None, &gan.weights);
+            let mut grads = g.total.backward();
+            let d = GradientsParams::from_module(&mut grads, &gan.discriminator).len();
+            let g = GradientsParams::from_module(&mut grads, &gan.generator).len();
+            (d, g)
+        };
+        // The frozen copy gets no gradient, the generator the same set either way, and
+        // freezing the copy left the discriminator itself trainable.
+        let (d_frozen, g_frozen) = count(&gan.discriminator.clone().no_grad());
+        let (d_live, g_live) = count(&gan.discriminator);
+        assert!(d_live > 0 && g_live > 0);
+        assert_eq!((d_frozen, g_frozen), (0, g_live));
     }
 
     #[test]

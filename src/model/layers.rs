@@ -9,6 +9,7 @@ use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::{ConvOptions, PadMode};
 use burn::tensor::{Device, Distribution, Tensor};
+use std::cell::Cell;
 
 /// What a stretch of the forward pass is spent on, for the per-layer profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -75,10 +76,52 @@ pub struct ConvNorm {
     reflect: usize,
     /// Zero padding, applied by the convolution.
     zeros: usize,
-    /// Run as [`shifted_conv`] instead of flex's im2col convolution.
+    /// Wide enough to run as [`shifted_conv`] on the CPU (see [`Formulation`]).
     shifted: bool,
     #[module(skip)]
     kind: LayerKind,
+}
+
+/// How the layers are written down. Flex (the CPU) runs slices, concatenations and plain matrix
+/// products faster than its generic pad and im2col kernels; on a GPU the same slices become many
+/// small kernels that stop Burn's fusion, and the backward of each slice builds a full-size zero
+/// tensor, while autotune picks a tuned kernel for a plain `conv2d`. Both write the same function
+/// (tested to agree), so weights do not depend on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Formulation {
+    /// Sliced on the CPU, plain on any other device.
+    Auto,
+    /// [`reflect_pad`] from slices and [`shifted_conv`] for wide stride-1 layers.
+    Sliced,
+    /// Burn's `conv2d` and `PadMode::Reflect`.
+    Plain,
+}
+
+thread_local! {
+    /// The choice of the thread that runs the forward pass; `mvpcc profile --layers` sets it to
+    /// measure one against the other. Per thread so that tests running side by side cannot see
+    /// each other's choice.
+    static FORMULATION: Cell<Formulation> = const { Cell::new(Formulation::Auto) };
+}
+
+impl Formulation {
+    /// Sets the formulation for forward passes run on this thread.
+    pub fn set(self) {
+        FORMULATION.with(|f| f.set(self));
+    }
+
+    fn current() -> Formulation {
+        FORMULATION.with(Cell::get)
+    }
+
+    /// Whether layers running on `device` use the sliced formulation.
+    fn sliced_on(device: &Device) -> bool {
+        match Formulation::current() {
+            Formulation::Auto => crate::device::is_cpu(device),
+            Formulation::Sliced => true,
+            Formulation::Plain => false,
+        }
+    }
 }
 
 /// Input planes from which [`shifted_conv`] beats flex's convolution: measured on 2 cores, 1.2–1.5×
@@ -109,11 +152,10 @@ impl ConvNorm {
         };
         let zeros = spec.pad - reflect;
         let shifted = spec.stride == 1 && spec.channels[0] >= SHIFTED_MIN_INPUT_PLANES;
-        let folded = if shifted { 0 } else { zeros };
         let conv = Conv2dConfig::new(spec.channels, [spec.kernel; 2])
             .with_stride([spec.stride; 2])
             .with_dilation([spec.dilation; 2])
-            .with_padding(PaddingConfig2d::Explicit(folded, folded, folded, folded))
+            .with_padding(PaddingConfig2d::Explicit(zeros, zeros, zeros, zeros))
             .with_initializer(gan_init())
             .init(device);
         let norm = spec.norm.then(|| {
@@ -134,14 +176,17 @@ impl ConvNorm {
     /// # Shapes
     /// `[n, c_in, h, w]` → `[n, c_out, h', w']`
     pub fn forward<P: Probe>(&self, x: Tensor<4>, probe: &mut P) -> Tensor<4> {
+        let sliced = Formulation::sliced_on(&x.device());
         let p = self.reflect;
-        let x = if p > 0 {
-            probe.layer(LayerKind::ReflectPad, || reflect_pad(x, p))
-        } else {
-            x
+        let x = match (p, sliced) {
+            (0, _) => x,
+            (_, true) => probe.layer(LayerKind::ReflectPad, || reflect_pad(x, p)),
+            (_, false) => probe.layer(LayerKind::ReflectPad, || {
+                x.pad([(p, p), (p, p)], PadMode::Reflect)
+            }),
         };
         let x = probe.layer(self.kind, || {
-            if !self.shifted {
+            if !(self.shifted && sliced) {
                 return self.conv.forward(x);
             }
             let z = self.zeros;
@@ -460,27 +505,43 @@ mod tests {
         }
     }
 
+    /// Both formulations of the layers that have two (reflection padding, wide stride-1
+    /// convolutions), values and input gradients.
     #[test]
-    fn both_convolution_paths_of_a_layer_agree() {
-        let device = Device::flex();
+    fn sliced_and_plain_formulations_agree_in_value_and_gradient() {
+        let device = Device::flex().autodiff();
+        let planes = SHIFTED_MIN_INPUT_PLANES;
+        let run = |formulation: Formulation, block: &ResBlock, head: &ConvNorm| {
+            formulation.set();
+            let x = Tensor::<4>::ones([1, 7, 10, 10], &device).require_grad();
+            let y = block.forward(head.forward(x.clone(), &mut NoProbe), &mut NoProbe);
+            let grads = y.clone().powf_scalar(2.0).sum().backward();
+            let dx = x.grad(&grads).unwrap();
+            Formulation::Auto.set();
+            (y.detach(), dx)
+        };
         for padding in [Padding::Reflect, Padding::Zero] {
-            let block = ResBlock::new(SHIFTED_MIN_INPUT_PLANES, padding, &device);
+            let block = ResBlock::new(planes, padding, &device);
             assert!(block.dilated.shifted && block.plain.shifted);
-            let mut im2col = ResBlock::new(SHIFTED_MIN_INPUT_PLANES, padding, &device);
-            for (layer, from) in [
-                (&mut im2col.dilated, &block.dilated),
-                (&mut im2col.plain, &block.plain),
-            ] {
-                layer.conv = from.conv.clone();
-                layer.conv.padding =
-                    PaddingConfig2d::Explicit(layer.zeros, layer.zeros, layer.zeros, layer.zeros);
-                layer.shifted = false;
-            }
-            let x = Tensor::<4>::random([1, 32, 10, 10], Distribution::Default, &device);
-            let a = block.forward(x.clone(), &mut NoProbe);
-            let b = im2col.forward(x, &mut NoProbe);
-            let err = (a - b).abs().max().into_scalar::<f32>();
-            assert!(err < 1e-4, "{padding:?}: {err}");
+            let head = ConvNorm::new(
+                ConvSpec {
+                    channels: [7, planes],
+                    kernel: 7,
+                    stride: 1,
+                    dilation: 1,
+                    pad: 3,
+                    norm: true,
+                    kind: LayerKind::Conv7x7,
+                },
+                padding,
+                &device,
+            );
+            let (ys, dxs) = run(Formulation::Sliced, &block, &head);
+            let (yp, dxp) = run(Formulation::Plain, &block, &head);
+            let err = (ys - yp).abs().max().into_scalar::<f32>();
+            assert!(err < 1e-4, "{padding:?} value: {err}");
+            let err = (dxs - dxp).abs().max().into_scalar::<f32>();
+            assert!(err < 1e-3, "{padding:?} gradient: {err}");
         }
     }
 

@@ -164,11 +164,13 @@ pub struct GeneratorLosses {
 
 /// The generator's objective for one batch. The smooth L1 term covers every output plane and
 /// is divided by the foreground fraction as the original does, so sparse objects weigh the
-/// same as dense ones.
+/// same as dense ones. `real_features` are the discriminator's features of the real views
+/// (constants), which the perceptual and style terms compare against when no VGG19 is given.
 pub fn generator_losses(
     output: &GeneratorOutput,
     target: &Target,
     discriminator: &Discriminator,
+    real_features: &[Tensor<4>],
     vgg: Option<&Vgg19>,
     weights: &LossWeights,
 ) -> GeneratorLosses {
@@ -202,16 +204,10 @@ pub fn generator_losses(
                 self::style(&pick(&fake, &STYLE_LAYERS), &pick(&real, &STYLE_LAYERS)),
             )
         }
-        None => {
-            let real = discriminator.forward(
-                discriminator_input(target.images.clone(), target.occupancy.clone()).detach(),
-            );
-            let real: Vec<Tensor<4>> = real.features.into_iter().map(|f| f.detach()).collect();
-            (
-                self::perceptual(&fake.features, &real),
-                self::style(&fake.features, &real),
-            )
-        }
+        None => (
+            self::perceptual(&fake.features, real_features),
+            self::style(&fake.features, real_features),
+        ),
     };
 
     let geometry = output

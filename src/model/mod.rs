@@ -17,7 +17,7 @@ pub mod weights;
 
 pub use discriminator::{Discriminator, DiscriminatorOutput};
 pub use generator::{Generator, GeneratorOutput};
-pub use layers::{LayerKind, NoProbe, Probe, SpectralConv2d};
+pub use layers::{Formulation, LayerKind, NoProbe, Probe, SpectralConv2d};
 
 use burn::config::Config;
 use burn::tensor::Device;

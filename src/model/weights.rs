@@ -201,6 +201,44 @@ pub fn discriminator_from_bytes(
     Ok(discriminator)
 }
 
+/// A generator built from `config` with the weights of a file made for a config that may
+/// differ from it in the image size alone: the networks are convolutional, so no tensor's shape
+/// depends on the size, and a model trained at 64² starts a 128² run.
+pub fn generator_for(
+    bytes: &[u8],
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Generator, WeightsError> {
+    compatible(&read_config(bytes, Network::Generator)?, config)?;
+    let mut generator = config.init_generator(device)?;
+    apply(&mut generator, bytes)?;
+    Ok(generator)
+}
+
+/// [`generator_for`] for a discriminator's file.
+pub fn discriminator_for(
+    bytes: &[u8],
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Discriminator, WeightsError> {
+    compatible(&read_config(bytes, Network::Discriminator)?, config)?;
+    let mut discriminator = config.init_discriminator(device)?;
+    apply(&mut discriminator, bytes)?;
+    Ok(discriminator)
+}
+
+/// Whether weights made for `found` fit a network built from `expected`: every field but the
+/// image size equal.
+pub fn compatible(found: &ModelConfig, expected: &ModelConfig) -> Result<(), WeightsError> {
+    if found.clone().with_size(expected.size) == *expected {
+        return Ok(());
+    }
+    Err(WeightsError::ConfigMismatch {
+        expected: serde_json::to_string(expected).unwrap_or_default(),
+        found: serde_json::to_string(found).unwrap_or_default(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -242,6 +280,35 @@ mod tests {
         assert!(matches!(
             discriminator_from_bytes(&bytes, &other, &device),
             Err(WeightsError::ConfigMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn weights_start_a_model_of_another_image_size_but_no_other_shape() {
+        let device = Device::flex();
+        let small = Preset::Tiny.config();
+        let g = small.init_generator(&device).unwrap();
+        let d = small.init_discriminator(&device).unwrap();
+        let (g_bytes, d_bytes) = (
+            generator_to_bytes(&g, &small).unwrap(),
+            discriminator_to_bytes(&d, &small).unwrap(),
+        );
+        let large = small.clone().with_size(64);
+        let g64 = generator_for(&g_bytes, &large, &device).unwrap();
+        discriminator_for(&d_bytes, &large, &device).unwrap();
+        let x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
+        assert_eq!(
+            g.forward(x.clone()).images.into_data(),
+            g64.forward(x).images.into_data()
+        );
+        let wider = small.clone().with_width(16);
+        assert!(matches!(
+            generator_for(&g_bytes, &wider, &device),
+            Err(WeightsError::ConfigMismatch { .. })
+        ));
+        assert!(matches!(
+            generator_for(&d_bytes, &large, &device),
+            Err(WeightsError::WrongNetwork { .. })
         ));
     }
 

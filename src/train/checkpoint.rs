@@ -7,7 +7,7 @@
 use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig};
 use crate::model::loss::LossWeights;
-use crate::model::weights::generator_to_bytes;
+use crate::model::weights::{discriminator_to_bytes, generator_to_bytes};
 use crate::model::ModelConfig;
 use burn::module::Module;
 use burn::store::ModuleRecord;
@@ -26,6 +26,9 @@ const GENERATOR_OPTIM: &str = "generator_optim.bpk";
 const DISCRIMINATOR_OPTIM: &str = "discriminator_optim.bpk";
 /// The generator alone as a self-describing weights file, what `complete --model` reads.
 pub const GENERATOR_WEIGHTS: &str = "generator.safetensors";
+/// The discriminator as a self-describing weights file, so that `train --init` can continue
+/// a run's adversarial game in a new run.
+pub const DISCRIMINATOR_WEIGHTS: &str = "discriminator.safetensors";
 
 #[derive(Debug, Error)]
 pub enum CheckpointError {
@@ -129,6 +132,9 @@ pub fn save(
     write(&tmp.join(DISCRIMINATOR_OPTIM), &d_optim)?;
     let weights = generator_to_bytes(&gan.generator, &gan.config).map_err(|e| invalid(&tmp, e))?;
     write(&tmp.join(GENERATOR_WEIGHTS), &weights)?;
+    let weights =
+        discriminator_to_bytes(&gan.discriminator, &gan.config).map_err(|e| invalid(&tmp, e))?;
+    write(&tmp.join(DISCRIMINATOR_WEIGHTS), &weights)?;
     let json = serde_json::to_vec_pretty(state).map_err(|e| invalid(&tmp, e))?;
     write(&tmp.join(STATE), &json)?;
     if dir.exists() {

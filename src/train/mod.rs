@@ -16,9 +16,10 @@ use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
 use crate::model::loss::LossWeights;
 use crate::model::vgg::Vgg19;
-use crate::model::ModelConfig;
+use crate::model::{weights, ModelConfig};
 use burn::module::Module;
-use checkpoint::{CheckpointError, TrainState, GENERATOR_WEIGHTS};
+use burn::tensor::Device;
+use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS, GENERATOR_WEIGHTS};
 use dataset::{hold_back, scan_split, AugmentSettings, Cache, DataError, SampleRef};
 use loader::{Loader, LoaderPlan};
 use serde::{Deserialize, Serialize};
@@ -66,6 +67,110 @@ pub struct TrainSettings {
     /// features without).
     #[serde(default)]
     pub vgg19: Option<PathBuf>,
+    /// The weights the run started from (`--init`); a fresh initialization when absent.
+    #[serde(default)]
+    pub init: Option<InitWeights>,
+}
+
+/// Trained weights a new run starts from, with fresh optimizers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InitWeights {
+    pub generator: PathBuf,
+    /// A fresh discriminator when absent.
+    pub discriminator: Option<PathBuf>,
+}
+
+/// The built-in generator's file name in assets/.
+const ASSETS_GENERATOR: &str = "model.safetensors";
+
+impl InitWeights {
+    /// The files `path` names: a generator's weights file, or a folder holding
+    /// generator.safetensors (a run) or model.safetensors (assets/), with the discriminator's
+    /// file beside it when there; `discriminator` overrides that one.
+    pub fn find(path: &Path, discriminator: Option<PathBuf>) -> Result<InitWeights, TrainError> {
+        let generator = if path.is_dir() {
+            [GENERATOR_WEIGHTS, ASSETS_GENERATOR]
+                .iter()
+                .map(|name| path.join(name))
+                .find(|p| p.is_file())
+                .ok_or_else(|| TrainError::Run {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "--init: holds neither {GENERATOR_WEIGHTS} nor {ASSETS_GENERATOR}"
+                    ),
+                })?
+        } else {
+            path.to_path_buf()
+        };
+        let beside = path.is_dir().then(|| path.join(DISCRIMINATOR_WEIGHTS));
+        Ok(InitWeights {
+            generator,
+            discriminator: discriminator.or(beside.filter(|p| p.is_file())),
+        })
+    }
+
+    /// The model config the generator's file declares.
+    pub fn config(&self) -> Result<ModelConfig, TrainError> {
+        let bytes = read_file(&self.generator)?;
+        weights::read_config(&bytes, weights::Network::Generator).map_err(|e| TrainError::Run {
+            path: self.generator.clone(),
+            problem: e.to_string(),
+        })
+    }
+
+    /// Refuses files that are unreadable or do not fit `config`, before a run starts.
+    pub fn check(&self, config: &ModelConfig) -> Result<(), TrainError> {
+        let files = [
+            (Some(&self.generator), weights::Network::Generator),
+            (self.discriminator.as_ref(), weights::Network::Discriminator),
+        ];
+        for (path, network) in files {
+            let Some(path) = path else { continue };
+            weights::read_config(&read_file(path)?, network)
+                .and_then(|found| weights::compatible(&found, config))
+                .map_err(|e| TrainError::Run {
+                    path: path.clone(),
+                    problem: format!("--init: {e}"),
+                })?;
+        }
+        Ok(())
+    }
+
+    /// Both networks for `config`, the discriminator fresh when no file is named.
+    fn load(&self, job: &Job, device: &Device) -> Result<Gan, TrainError> {
+        let config = &job.model;
+        let fail = |path: &Path| {
+            let path = path.to_path_buf();
+            move |e: weights::WeightsError| TrainError::Run {
+                path,
+                problem: format!("--init: {e}"),
+            }
+        };
+        let generator = weights::generator_for(&read_file(&self.generator)?, config, device)
+            .map_err(fail(&self.generator))?;
+        let discriminator = match &self.discriminator {
+            Some(path) => {
+                weights::discriminator_for(&read_file(path)?, config, device).map_err(fail(path))?
+            }
+            None => config
+                .init_discriminator(device)
+                .map_err(|e| TrainError::Run {
+                    path: self.generator.clone(),
+                    problem: e.to_string(),
+                })?,
+        };
+        Ok(Gan::from_parts(
+            generator,
+            discriminator,
+            config.clone(),
+            job.settings.loss.clone(),
+            job.settings.optim.clone(),
+        ))
+    }
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>, TrainError> {
+    std::fs::read(path).map_err(io_err(path))
 }
 
 impl TrainSettings {
@@ -93,6 +198,7 @@ impl TrainSettings {
             loss: LossWeights::new(),
             optim: GanOptimConfig::new(),
             vgg19: None,
+            init: None,
         }
     }
 
@@ -476,16 +582,30 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         }
         None => {
             autodiff.seed(settings.seed);
-            let gan = Gan::new(
-                job.model.clone(),
-                settings.loss.clone(),
-                settings.optim.clone(),
-                &autodiff,
-            )
-            .map_err(|e| TrainError::Run {
-                path: run.clone(),
-                problem: e.to_string(),
-            })?;
+            let gan = match &settings.init {
+                Some(init) => {
+                    let gan = init.load(&job, &autodiff)?;
+                    monitor.message(&format!(
+                        "starting from {}{}",
+                        init.generator.display(),
+                        init.discriminator.as_ref().map_or(
+                            " and a fresh discriminator".to_string(),
+                            |d| format!(" and {}", d.display())
+                        )
+                    ));
+                    gan
+                }
+                None => Gan::new(
+                    job.model.clone(),
+                    settings.loss.clone(),
+                    settings.optim.clone(),
+                    &autodiff,
+                )
+                .map_err(|e| TrainError::Run {
+                    path: run.clone(),
+                    problem: e.to_string(),
+                })?,
+            };
             (gan, TrainState::new())
         }
     };
@@ -633,12 +753,34 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         }
     };
 
+    // However the run ended, its last step is validated and its samples drawn, so a short run
+    // still shows where it got to. This validation is logged but leaves the stage and patience
+    // alone: a run stopped and resumed continues exactly as one that never stopped.
+    let validated = log
+        .records
+        .iter()
+        .any(|r| matches!(r, LogRecord::Validation { step, .. } if *step == state.step));
+    if let Some(v) = validator.as_ref().filter(|_| state.step > 0 && !validated) {
+        let scores = v.run(&gan, run, state.step)?;
+        let record = LogRecord::Validation {
+            step: state.step,
+            stage: state
+                .stage
+                .min(settings.stage_rates.len().saturating_sub(1)),
+            scores: scores.clone(),
+        };
+        monitor.record(&record);
+        log.push(record)?;
+        last_scores = Some(scores);
+    }
     let dir = match &last_checkpoint {
         Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
         _ => checkpoint::save(run, &gan, &state, settings.keep)?,
     };
-    let weights = run.join(GENERATOR_WEIGHTS);
-    std::fs::copy(dir.join(GENERATOR_WEIGHTS), &weights).map_err(io_err(&weights))?;
+    for name in [GENERATOR_WEIGHTS, DISCRIMINATOR_WEIGHTS] {
+        let weights = run.join(name);
+        std::fs::copy(dir.join(name), &weights).map_err(io_err(&weights))?;
+    }
     log.draw(run)?;
     Ok(Summary {
         outcome,

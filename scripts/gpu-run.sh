@@ -1,0 +1,203 @@
+#!/usr/bin/env bash
+# One GPU session's work in one command: profiles of mvpcc (CUDA, wgpu) and PyTorch side by side,
+# fresh training data made on the machine's CPU cores, then one leg of the default model's
+# training relay for the remaining minutes. Everything it leaves is in OUT, in at most 8 files
+# of at most 15 MiB (what the device tool brings back). docs/training.md says how to run a leg
+# and how to judge it; `--tiny` runs the whole script on the CPU in a few minutes, so a typo
+# never costs GPU time.
+#
+#   scripts/gpu-run.sh [options] OUT
+#
+#   --bin FILE        mvpcc built with --features cuda,wgpu, plain or .xz (scripts/build-cuda.sh)
+#                     [target/cuda-dist/mvpcc.xz]
+#   --minutes M       wall-clock budget of the whole script, minutes [9]
+#   --objects N       procedural vehicles to train on (prepare --synth) [6000]
+#   --seed N          their seed; each leg should draw new ones [the date, YYYYMMDD]
+#   --init PATH|none  weights the leg starts from (train --init) [assets]
+#   --config NAME     model of a fresh run (--init none): a preset or a config file [cpu]
+#   --size S          view side of the data and the model [128]
+#   --batch B         objects per step [16]
+#   --lr R            first-stage learning rate [5e-4]
+#   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
+#
+# OUT gets: run.log (every command and its output, with times), profiles.txt (the
+# `*_ms_median=` lines of every profile, mvpcc and PyTorch), train.json (the run's summary),
+# run.tar.xz.part-* (the run directory without checkpoints: weights, config, log.jsonl,
+# losses.png, samples/). Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
+set -uo pipefail
+
+bin=target/cuda-dist/mvpcc.xz
+minutes=9
+objects=6000
+seed=$(date +%Y%m%d)
+init=assets
+config=cpu
+size=128
+batch=16
+lr=5e-4
+tiny=false
+while [ $# -gt 1 ]; do
+    case $1 in
+    --bin) bin=$2 ;;
+    --minutes) minutes=$2 ;;
+    --objects) objects=$2 ;;
+    --seed) seed=$2 ;;
+    --init) init=$2 ;;
+    --config) config=$2 ;;
+    --size) size=$2 ;;
+    --batch) batch=$2 ;;
+    --lr) lr=$2 ;;
+    --tiny) tiny=true; shift; continue ;;
+    *) echo "error: unknown option $1" >&2; exit 2 ;;
+    esac
+    shift 2
+done
+[ $# -eq 1 ] || { echo "usage: scripts/gpu-run.sh [options] OUT" >&2; exit 2; }
+out=$1
+mkdir -p "$out"
+out=$(cd "$out" && pwd)
+work=$(mktemp -d /tmp/mvpcc-gpu-run.XXXXXX)
+deadline=$(($(date +%s) + minutes * 60))
+log=$out/run.log
+profiles=$out/profiles.txt
+: >"$log"
+: >"$profiles"
+
+device=cuda
+split=0.93
+gt_size=256
+workers=6
+val_every=200
+runs=5
+warmup=3
+# Seconds kept back after training for the completion timings and the packing.
+margin=75
+if $tiny; then
+    device=cpu objects=16 split=0.67 size=32 gt_size=64 batch=2 workers=1 val_every=5 runs=1
+    warmup=0
+    config=tiny init=none margin=20
+    [ "$minutes" -gt 3 ] && minutes=3 && deadline=$(($(date +%s) + 180))
+fi
+
+say() { echo "[$(date -u +%H:%M:%S)] $*" | tee -a "$log" >&2; }
+# Runs a command with a time limit, logging it and its output; its status is returned.
+step() {
+    local limit=$1
+    shift
+    say "\$ $*"
+    timeout -k 10 "$limit" "$@" >>"$log" 2>&1
+    local status=$?
+    [ $status -eq 0 ] || say "exit status $status"
+    return $status
+}
+# A profile's last line, `<what>_ms_median=<ms>`, with what was profiled.
+profile() {
+    local label=$1
+    shift
+    if step 150 "$@"; then
+        echo "$label $(grep '_ms_median=' "$log" | tail -1)" >>"$profiles"
+    else
+        echo "$label failed (see run.log)" >>"$profiles"
+    fi
+}
+
+case $bin in
+*.xz) xz -dc "$bin" >"$work/mvpcc" || { say "cannot unpack $bin"; exit 1; } ;;
+*) cp "$bin" "$work/mvpcc" || { say "cannot copy $bin"; exit 1; } ;;
+esac
+chmod +x "$work/mvpcc"
+mvpcc=$work/mvpcc
+say "mvpcc $($mvpcc --version), device $device, out $out"
+if command -v nvidia-smi >/dev/null; then
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | tee -a "$profiles" >>"$log"
+fi
+# A Vulkan loader for wgpu, when the caller carried one (see docs/training.md).
+if ls .gl/*.deb >/dev/null 2>&1; then
+    for f in .gl/*.deb; do dpkg -x "$f" /; done
+    ldconfig
+fi
+
+# The data is made on the CPU cores while the GPU is profiled; niced, so the profiles' host
+# threads keep their cores (PyTorch and mvpcc are profiled under the same load).
+data=$work/data
+say "\$ prepare --synth $objects --seed $seed --size $size (in the background)"
+nice -n 15 "$mvpcc" --quiet prepare --synth "$objects" --seed "$seed" --split "$split" \
+    --size "$size" --gt-size "$gt_size" --samples 4 --out "$data" >>"$log" 2>&1 &
+prepare=$!
+
+tiny_config=()
+$tiny && tiny_config=(--config tiny)
+profile_args=(--device "$device" --runs "$runs" --warmup "$warmup")
+torch=benches/reference/generator_torch.py
+if $tiny; then
+    profile "mvpcc tiny train step, batch $batch:" "$mvpcc" profile "${profile_args[@]}" "${tiny_config[@]}" --train --batch "$batch"
+    profile "mvpcc tiny forward:" "$mvpcc" profile "${profile_args[@]}" "${tiny_config[@]}"
+    if python3 -c 'import torch' 2>/dev/null; then
+        profile "torch tiny train step:" python3 "$torch" --device cpu --config tiny --train --batch "$batch" --runs 1 --warmup 0
+    else
+        say "no PyTorch here: its profiles are skipped"
+    fi
+else
+    for d in cuda wgpu; do
+        profile "mvpcc $d small train step, batch 16:" "$mvpcc" profile "${profile_args[@]}" --device $d --config small --train --batch 16
+    done
+    profile "mvpcc cuda small train step, batch 16, sliced layers:" "$mvpcc" profile "${profile_args[@]}" --config small --train --batch 16 --layers sliced
+    profile "mvpcc cuda cpu-preset train step, batch $batch:" "$mvpcc" profile "${profile_args[@]}" --config cpu --train --batch "$batch"
+    profile "mvpcc cuda paper forward, batch 1:" "$mvpcc" profile "${profile_args[@]}" --config paper
+    profile "mvpcc wgpu paper forward, batch 1:" "$mvpcc" profile "${profile_args[@]}" --device wgpu --config paper
+    profile "torch cuda small train step, batch 16:" python3 "$torch" --device cuda --config small --train --batch 16
+    profile "torch cuda cpu-preset train step, batch $batch:" python3 "$torch" --device cuda --config cpu --train --batch "$batch"
+    profile "torch cuda paper forward, batch 1:" python3 "$torch" --device cuda --config paper
+fi
+
+say "waiting for the data"
+wait $prepare || { say "prepare failed"; exit 1; }
+du -sh "$data" >>"$log"
+
+init_args=(--config "$config")
+[ "$init" = none ] || init_args=(--init "$init")
+run=$work/run
+left=$((deadline - $(date +%s) - margin))
+[ $left -gt 10 ] || { say "no time left to train"; exit 1; }
+# SIGINT is train's Ctrl-C: it checkpoints, validates the last step and draws its samples.
+# timeout answers 124 when it sent the signal, whatever train then did; train's own status is
+# in its summary (train.json, "outcome": "interrupted").
+say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch --lr $lr ($left s)"
+timeout -k 60 $((left + 60)) timeout -s INT "$left" "$mvpcc" train --data "$data" --out "$run" \
+    "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" --lr "$lr" \
+    --val-every "$val_every" --val-samples 32 --checkpoint-every 500 --workers "$workers" \
+    --json >"$out/train.json" 2>>"$log"
+status=$?
+[ $status -eq 0 ] || [ $status -eq 124 ] || say "train: exit status $status"
+
+# The network's share of `complete` (encoder, fusion, decoder), median over the files after
+# the first, whose kernels are compiled and tuned on the way.
+cases=$work/cases
+mkdir -p "$cases"
+cp assets/example/car_partial.ply "$cases/"
+find "$data/clouds/test" -name 'partial_*.ply' 2>/dev/null | head -8 |
+    while read -r f; do cp "$f" "$cases/$(echo "${f#"$data"/clouds/test/}" | tr / _)"; done
+for model in built-in "$run"; do
+    model_args=()
+    [ "$model" = built-in ] || model_args=(--model "$model")
+    say "\$ complete --input-dir $cases --device $device --jobs 1 --json ${model_args[*]}"
+    if timeout 150 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed" \
+        --device "$device" --jobs 1 --json "${model_args[@]}" >"$work/complete.json" 2>>"$log"; then
+        python3 - "$work/complete.json" "$model" >>"$profiles" <<'PY'
+import json, statistics, sys
+seconds = [r["seconds"] for r in json.load(open(sys.argv[1])) if "seconds" in r]
+seconds = seconds[1:] or seconds
+net = [1e3 * (s["encoder"] + s["fusion"] + s["decoder"]) for s in seconds]
+total = [1e3 * s["total"] for s in seconds]
+print(f"mvpcc complete, model {sys.argv[2]}, {len(seconds)} files: "
+      f"network_ms_median={statistics.median(net):.1f} total_ms_median={statistics.median(total):.1f}")
+PY
+    else
+        echo "mvpcc complete, model $model: failed (see run.log)" >>"$profiles"
+    fi
+done
+
+say "packing"
+tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz -T0 -3 |
+    split -b 15M - "$out/run.tar.xz.part-"
+ls -l "$out" | tee -a "$log" >&2

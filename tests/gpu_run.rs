@@ -1,0 +1,80 @@
+//! `scripts/gpu-run.sh --tiny`: the prepared GPU run, every step of it on the CPU with the tiny
+//! model, so that the command a GPU session sends has run before it costs GPU minutes.
+
+use std::path::Path;
+use std::process::Command;
+
+#[cfg(unix)]
+#[test]
+fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = Command::new("bash")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .arg("scripts/gpu-run.sh")
+        .args(["--tiny", "--minutes", "1", "--bin"])
+        .arg(assert_cmd::cargo::cargo_bin("mvpcc"))
+        .arg(&out)
+        .output()
+        .unwrap();
+    let log = std::fs::read_to_string(out.join("run.log")).unwrap_or_default();
+    assert!(output.status.success(), "{log}");
+
+    let profiles = std::fs::read_to_string(out.join("profiles.txt")).unwrap();
+    for line in [
+        "mvpcc tiny train step, batch 2: train_step_ms_median=",
+        "mvpcc tiny forward: forward_ms_median=",
+    ] {
+        assert!(profiles.contains(line), "no {line:?} in {profiles}");
+    }
+    assert_eq!(
+        profiles.matches("network_ms_median=").count(),
+        2,
+        "{profiles}"
+    );
+
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap()).unwrap();
+    assert_eq!(summary["outcome"], "interrupted", "{summary}");
+    assert!(summary["step"].as_u64().unwrap() > 0, "{summary}");
+
+    let run = dir.path().join("run");
+    std::fs::create_dir(&run).unwrap();
+    let parts: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().contains("run.tar.xz.part-"))
+        .collect();
+    assert!(!parts.is_empty() && parts.len() <= 5, "{parts:?}");
+    let unpacked = Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "cat {}/run.tar.xz.part-* | tar -xJ -C {}",
+            out.display(),
+            run.display()
+        ))
+        .status()
+        .unwrap();
+    assert!(unpacked.success());
+    for file in [
+        "generator.safetensors",
+        "discriminator.safetensors",
+        "config.json",
+        "train.json",
+        "log.jsonl",
+        "losses.png",
+    ] {
+        assert!(
+            run.join(file).is_file(),
+            "{file} missing from the packed run"
+        );
+    }
+    assert!(!run.join("checkpoints").exists());
+    assert!(has_png(&run.join("samples")), "no samples drawn");
+}
+
+fn has_png(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|mut d| {
+        d.any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")))
+    })
+}

@@ -125,29 +125,42 @@ nice -n 15 "$mvpcc" --quiet prepare --synth "$objects" --seed "$seed" --split "$
     --size "$size" --gt-size "$gt_size" --samples 4 --out "$data" >>"$log" 2>&1 &
 prepare=$!
 
-tiny_config=()
-$tiny && tiny_config=(--config tiny)
-profile_args=(--device "$device" --runs "$runs" --warmup "$warmup")
-torch=benches/reference/generator_torch.py
+# The same lines run in --tiny (on the CPU, tiny model) and on the GPU, so the test of --tiny
+# checks every flag the GPU run passes.
 if $tiny; then
-    profile "mvpcc tiny train step, batch $batch:" "$mvpcc" profile "${profile_args[@]}" "${tiny_config[@]}" --train --batch "$batch"
-    profile "mvpcc tiny forward:" "$mvpcc" profile "${profile_args[@]}" "${tiny_config[@]}"
-    if python3 -c 'import torch' 2>/dev/null; then
-        profile "torch tiny train step:" python3 "$torch" --device cpu --config tiny --train --batch "$batch" --runs 1 --warmup 0
-    else
-        say "no PyTorch here: its profiles are skipped"
-    fi
+    devices=(cpu) step_configs=(tiny) forward_configs=(tiny) torch_device=cpu profile_batch=2
 else
-    for d in cuda wgpu; do
-        profile "mvpcc $d small train step, batch 16:" "$mvpcc" profile "${profile_args[@]}" --device $d --config small --train --batch 16
+    devices=(cuda wgpu) step_configs=(small cpu) forward_configs=(paper) torch_device=cuda
+    profile_batch=16
+fi
+timing=(--runs "$runs" --warmup "$warmup")
+for config in "${step_configs[@]}"; do
+    for d in "${devices[@]}"; do
+        profile "mvpcc $d $config train step, batch $profile_batch:" "$mvpcc" profile \
+            "${timing[@]}" --device "$d" --config "$config" --train --batch "$profile_batch"
     done
-    profile "mvpcc cuda small train step, batch 16, sliced layers:" "$mvpcc" profile "${profile_args[@]}" --config small --train --batch 16 --layers sliced
-    profile "mvpcc cuda cpu-preset train step, batch $batch:" "$mvpcc" profile "${profile_args[@]}" --config cpu --train --batch "$batch"
-    profile "mvpcc cuda paper forward, batch 1:" "$mvpcc" profile "${profile_args[@]}" --config paper
-    profile "mvpcc wgpu paper forward, batch 1:" "$mvpcc" profile "${profile_args[@]}" --device wgpu --config paper
-    profile "torch cuda small train step, batch 16:" python3 "$torch" --device cuda --config small --train --batch 16
-    profile "torch cuda cpu-preset train step, batch $batch:" python3 "$torch" --device cuda --config cpu --train --batch "$batch"
-    profile "torch cuda paper forward, batch 1:" python3 "$torch" --device cuda --config paper
+    profile "mvpcc ${devices[0]} $config train step, batch $profile_batch, sliced layers:" \
+        "$mvpcc" profile "${timing[@]}" --device "${devices[0]}" --config "$config" --train \
+        --batch "$profile_batch" --layers sliced
+done
+for config in "${forward_configs[@]}"; do
+    for d in "${devices[@]}"; do
+        profile "mvpcc $d $config forward, batch 1:" "$mvpcc" profile "${timing[@]}" \
+            --device "$d" --config "$config"
+    done
+done
+torch=benches/reference/generator_torch.py
+if python3 -c 'import torch' 2>/dev/null; then
+    for config in "${step_configs[@]}"; do
+        profile "torch $torch_device $config train step, batch $profile_batch:" python3 "$torch" \
+            "${timing[@]}" --device "$torch_device" --config "$config" --train --batch "$profile_batch"
+    done
+    for config in "${forward_configs[@]}"; do
+        profile "torch $torch_device $config forward, batch 1:" python3 "$torch" "${timing[@]}" \
+            --device "$torch_device" --config "$config"
+    done
+else
+    say "no PyTorch here: its profiles are skipped"
 fi
 
 say "waiting for the data"

@@ -428,6 +428,15 @@ fn shipped_example_is_what_the_generator_makes() {
     assert_eq!(partial, shapes::scanned_side(&car));
 }
 
+/// The number after `prefix` on the last line of `stdout`.
+fn last_line_value(stdout: &str, prefix: &str) -> f64 {
+    let last = stdout.lines().last().unwrap_or_default();
+    last.strip_prefix(prefix)
+        .unwrap_or_else(|| panic!("last line {last:?}"))
+        .parse()
+        .unwrap()
+}
+
 #[test]
 fn profile_reports_a_median_and_a_breakdown() {
     let assert = mvpcc()
@@ -438,13 +447,7 @@ fn profile_reports_a_median_and_a_breakdown() {
         .success();
     let out = assert.get_output();
     let stdout = String::from_utf8(out.stdout.clone()).unwrap();
-    let last = stdout.lines().last().unwrap();
-    let ms: f64 = last
-        .strip_prefix("forward_ms_median=")
-        .unwrap_or_else(|| panic!("last line {last:?}"))
-        .parse()
-        .unwrap();
-    assert!(ms > 0.0);
+    assert!(last_line_value(&stdout, "forward_ms_median=") > 0.0);
     for kind in [
         "conv 7x7",
         "conv 3x3 residual",
@@ -508,13 +511,7 @@ fn profile_train_times_whole_gan_steps_phase_by_phase() {
         .stdout
         .clone();
     let stdout = String::from_utf8(out).unwrap();
-    let last = stdout.lines().last().unwrap();
-    let ms: f64 = last
-        .strip_prefix("train_step_ms_median=")
-        .unwrap_or_else(|| panic!("last line {last:?}"))
-        .parse()
-        .unwrap();
-    assert!(ms > 0.0);
+    assert!(last_line_value(&stdout, "train_step_ms_median=") > 0.0);
     let phases: Vec<&str> = stdout
         .lines()
         .skip(1)

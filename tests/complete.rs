@@ -237,6 +237,9 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         ..Default::default()
     };
     write_cloud(&inputs.join("few.ply"), &few, None, Encoding::Binary).unwrap();
+    // A link back to the top of the tree: followed once, its files not taken twice.
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&inputs, inputs.join("street/loop")).unwrap();
     let outputs = dir.path().join("out");
     let assert = mvpcc()
         .args([

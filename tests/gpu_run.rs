@@ -22,8 +22,9 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
 
     let profiles = std::fs::read_to_string(out.join("profiles.txt")).unwrap();
     for line in [
-        "mvpcc tiny train step, batch 2: train_step_ms_median=",
-        "mvpcc tiny forward: forward_ms_median=",
+        "mvpcc cpu tiny train step, batch 2: train_step_ms_median=",
+        "mvpcc cpu tiny train step, batch 2, sliced layers: train_step_ms_median=",
+        "mvpcc cpu tiny forward, batch 1: forward_ms_median=",
     ] {
         assert!(profiles.contains(line), "no {line:?} in {profiles}");
     }

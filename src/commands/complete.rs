@@ -305,13 +305,22 @@ fn cloud_files(dir: &Path, include: Option<&str>) -> anyhow::Result<Vec<PathBuf>
     let pattern: Option<Vec<char>> = include.map(|p| p.chars().collect());
     let mut found = Vec::new();
     let mut pending = vec![dir.to_path_buf()];
+    // Links are followed, but every directory and file is taken once: a link back into the
+    // tree (or to its parent) would otherwise repeat it down to the path-length limit.
+    let mut seen = std::collections::HashSet::new();
     while let Some(d) = pending.pop() {
+        if !seen.insert(d.canonicalize().unwrap_or_else(|_| d.clone())) {
+            continue;
+        }
         let entries =
             std::fs::read_dir(&d).with_context(|| format!("{}: cannot list", d.display()))?;
         for entry in entries {
             let path = entry.with_context(|| d.display().to_string())?.path();
             if path.is_dir() {
                 pending.push(path);
+                continue;
+            }
+            if !seen.insert(path.canonicalize().unwrap_or_else(|_| path.clone())) {
                 continue;
             }
             let name: Vec<char> = path

@@ -9,6 +9,9 @@ use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};
 use std::path::Path;
 
+/// Points read at a time.
+const BATCH: u64 = 1 << 20;
+
 fn las_problem(e: las::Error) -> Problem {
     match e {
         las::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
@@ -24,34 +27,38 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
     let header = reader.header().clone();
     let declared = header.number_of_points() as usize;
-    let data = reader.read_all().map_err(las_problem)?;
-    if data.len() < declared {
-        return Err(Problem::Truncated {
-            declared,
-            found: data.len(),
-        });
-    }
     let t = header.transforms();
     let quantization = Quantization {
         scale: [t.x.scale, t.y.scale, t.z.scale],
         offset: [t.x.offset, t.y.offset, t.z.offset],
     };
     let has_color = header.point_format().has_color;
-    let n = data.len();
-    let mut positions = Vec::with_capacity(n);
-    let mut colors16 = Vec::with_capacity(if has_color { n } else { 0 });
-    let mut intensity = Vec::with_capacity(n);
-    let mut classification = Vec::with_capacity(n);
-    let mut synthetic = Vec::with_capacity(n);
-    for p in data.points() {
-        let p = p.map_err(las_problem)?;
-        positions.push([p.x, p.y, p.z]);
-        if let Some(c) = p.color {
-            colors16.push([c.red, c.green, c.blue]);
+    let mut positions = Vec::new();
+    let mut colors16 = Vec::new();
+    let mut intensity = Vec::new();
+    let mut classification = Vec::new();
+    let mut synthetic = Vec::new();
+    // In batches, so memory follows the points the file holds, not the count its header claims
+    // (the las crate sizes one buffer for the whole declared count).
+    loop {
+        let data = reader.read_points(BATCH).map_err(las_problem)?;
+        if data.is_empty() {
+            break;
         }
-        intensity.push(p.intensity as f64);
-        classification.push(u8::from(p.classification) as f64);
-        synthetic.push(if p.is_synthetic { 1.0 } else { 0.0 });
+        for p in data.points() {
+            let p = p.map_err(las_problem)?;
+            positions.push([p.x, p.y, p.z]);
+            if let Some(c) = p.color {
+                colors16.push([c.red, c.green, c.blue]);
+            }
+            intensity.push(p.intensity as f64);
+            classification.push(u8::from(p.classification) as f64);
+            synthetic.push(if p.is_synthetic { 1.0 } else { 0.0 });
+        }
+    }
+    let n = positions.len();
+    if n < declared {
+        return Err(Problem::Truncated { declared, found: n });
     }
     // Most writers scale 8-bit colour to 16 bits; some store 8-bit values as they are.
     let sixteen_bit = colors16.iter().flatten().any(|&v| v > 255);

@@ -348,6 +348,25 @@ mod tests {
         }
     }
 
+    /// A header claiming 10⁹ points in a file of a few: refused from the points that are
+    /// there, without first allocating for the claim (the las crate's `read_all` asked for
+    /// ~19 GiB here).
+    #[test]
+    fn a_las_header_claiming_a_billion_points_is_refused_without_allocating_for_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cloud.las");
+        write_cloud(&path, &colored_cloud(true), None, Encoding::Binary).unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        // LAS 1.2's legacy point count, a u32 at byte 107 of the header.
+        bytes[107..111].copy_from_slice(&1_000_000_000u32.to_le_bytes());
+        std::fs::write(&path, &bytes).unwrap();
+        let err = read_cloud(&path, None).unwrap_err().to_string();
+        assert!(
+            err.contains("1000000000") || err.contains("file ends before"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn las_carries_the_synthetic_flag() {
         let mut cloud = colored_cloud(true);

@@ -391,11 +391,17 @@ mod tests {
         (input, Target { images, occupancy })
     }
 
-    fn train(weights: LossWeights, steps: usize) -> (Gan, Vec<StepLosses>) {
+    /// The tiny GAN on the CPU, recording gradients, from a seeded initialization.
+    fn tiny_gan(weights: LossWeights, seed: u64) -> (Gan, Device) {
         let device = Device::flex().autodiff();
-        device.seed(7);
+        device.seed(seed);
         let optim = GanOptimConfig::new();
-        let mut gan = Gan::new(Preset::Tiny.config(), weights, optim, &device).unwrap();
+        let gan = Gan::new(Preset::Tiny.config(), weights, optim, &device).unwrap();
+        (gan, device)
+    }
+
+    fn train(weights: LossWeights, steps: usize) -> (Gan, Vec<StepLosses>) {
+        let (mut gan, device) = tiny_gan(weights, 7);
         let (input, target) = sample(&device);
         let batch = [Batch { input, target }];
         let mut history = Vec::new();
@@ -433,15 +439,7 @@ mod tests {
 
     #[test]
     fn the_generators_loss_gives_gradients_to_the_generator_alone() {
-        let device = Device::flex().autodiff();
-        device.seed(5);
-        let gan = Gan::new(
-            Preset::Tiny.config(),
-            LossWeights::new(),
-            GanOptimConfig::new(),
-            &device,
-        )
-        .unwrap();
+        let (gan, device) = tiny_gan(LossWeights::new(), 5);
         let (input, target) = sample(&device);
         let real = gan.discriminator.forward(discriminator_input(
             target.images.clone(),
@@ -467,15 +465,7 @@ mod tests {
 
     #[test]
     fn vgg_features_drive_the_perceptual_and_style_terms() {
-        let device = Device::flex().autodiff();
-        device.seed(3);
-        let mut gan = Gan::new(
-            Preset::Tiny.config(),
-            LossWeights::new(),
-            GanOptimConfig::new(),
-            &device,
-        )
-        .unwrap();
+        let (mut gan, device) = tiny_gan(LossWeights::new(), 3);
         let (input, target) = sample(&device);
         let batch = [Batch { input, target }];
         let (next, plain) = gan.step(&batch, 1e-4);

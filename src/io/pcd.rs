@@ -314,6 +314,10 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     Ok(collector.cloud)
 }
 
+/// LZF spends at least 3 bytes on every 264 it reproduces (its longest back reference), so no
+/// block expands more than this: a larger claim is refused before anything is allocated for it.
+const LZF_MAX_EXPANSION: usize = 89;
+
 fn decompress(body: &[u8], points: usize, record: usize) -> Result<Vec<u8>, Problem> {
     if body.len() < 8 {
         return Err(malformed(
@@ -336,6 +340,11 @@ fn decompress(body: &[u8], points: usize, record: usize) -> Result<Vec<u8>, Prob
     }
     if uncompressed == 0 {
         return Ok(Vec::new());
+    }
+    if uncompressed / LZF_MAX_EXPANSION > compressed {
+        return Err(malformed(format!(
+            "binary_compressed body of {compressed} bytes cannot hold the {uncompressed} it declares"
+        )));
     }
     lzf::decompress(&body[8..8 + compressed], uncompressed)
         .map_err(|e| malformed(format!("binary_compressed body does not decompress: {e:?}")))
@@ -637,6 +646,20 @@ mod tests {
         bytes.extend_from_slice(&36u32.to_le_bytes());
         bytes.extend_from_slice(&[0u8; 10]);
         assert!(read_bytes(&bytes).is_err());
+    }
+
+    #[test]
+    fn a_compressed_size_no_lzf_block_can_reach_is_refused_before_allocating() {
+        // 357,913,941 points of 12 bytes: a 4 GiB block claimed by 10 compressed bytes.
+        let header = "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n\
+                      COUNT 1 1 1\nWIDTH 357913941\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n\
+                      POINTS 357913941\nDATA binary_compressed\n";
+        let mut bytes = header.as_bytes().to_vec();
+        bytes.extend_from_slice(&10u32.to_le_bytes());
+        bytes.extend_from_slice(&0xFFFF_FFFCu32.to_le_bytes());
+        bytes.extend_from_slice(&[0u8; 10]);
+        let err = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(err.contains("cannot hold"), "{err}");
     }
 
     #[test]

@@ -99,7 +99,8 @@ impl SorOptions {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Metric {
-    /// Chamfer distances: cd_l2_half (the paper's), cd_l1 (PCN), cd_l2 (PoinTr).
+    /// Chamfer distances: cd_l2_half (the paper's Eq. 5, squared), cd_l1 (PCN; the scale the
+    /// paper's tables print, docs/paper.md), cd_l2 (PoinTr).
     Cd,
     /// Precision, recall and F1 at each --tau.
     F1,

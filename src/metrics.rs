@@ -1,6 +1,7 @@
-//! Completion metrics. Geometry: Chamfer distance in the paper's convention (squared distances,
-//! each direction halved: `cd_l2_half`), PCN's `cd_l1` (mean distances, halved) and PoinTr's
-//! un-halved `cd_l2`; precision, recall and F1 at thresholds τ with a strict `<`. Colour on view
+//! Completion metrics. Geometry: Chamfer distance as the paper's Eq. 5 writes it (squared
+//! distances, each direction halved: `cd_l2_half`), PCN's `cd_l1` (mean distances, halved: the
+//! scale the paper's tables print, as scoring clouds at known noise shows, docs/paper.md) and
+//! PoinTr's un-halved `cd_l2`; precision, recall and F1 at thresholds τ with a strict `<`. Colour on view
 //! images: PSNR, SSIM and MAE.
 
 use crate::knn::knn_distances;
@@ -20,9 +21,9 @@ pub struct FScore {
 pub struct CloudMetrics {
     pub pred_points: usize,
     pub gt_points: usize,
-    /// `1/(2|P|)·Σ d(p,G)² + 1/(2|G|)·Σ d(g,P)²` (the paper's CD).
+    /// `1/(2|P|)·Σ d(p,G)² + 1/(2|G|)·Σ d(g,P)²` (the paper's Eq. 5).
     pub cd_l2_half: f64,
-    /// `(mean d(p,G) + mean d(g,P)) / 2` (PCN).
+    /// `(mean d(p,G) + mean d(g,P)) / 2` (PCN): the scale of the CD the paper's tables print.
     pub cd_l1: f64,
     /// `mean d(p,G)² + mean d(g,P)²` (PoinTr's CD-L2, twice the paper's).
     pub cd_l2: f64,

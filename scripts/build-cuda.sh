@@ -16,7 +16,7 @@
 #   installed copy; the same LLVM 23 comes as the PyPI package mlc-llvm-static, which this script
 #   installs into a venv under target/ and presents where the bundler looks
 #   ($XDG_DATA_HOME/tracel/...), with the marker file the bundler writes after its own install.
-# - The binary needs glibc >= 2.34 and GLIBCXX_3.4.29 where it runs.
+# - The binary needs glibc >= 2.35 and GLIBCXX_3.4.30 where it runs (as built on Debian 12).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD/target/cuda-llvm

@@ -101,8 +101,14 @@ profile() {
     fi
 }
 
+# xz where the machine has it, else Python's lzma module (same format).
+unxz_to() { if command -v xz >/dev/null; then xz -dc "$1" >"$2"; else
+    python3 -c 'import lzma, shutil, sys; shutil.copyfileobj(lzma.open(sys.argv[1]), open(sys.argv[2], "wb"))' "$1" "$2"; fi; }
+xz_stream() { if command -v xz >/dev/null; then xz -T0 -3; else
+    python3 -c 'import lzma, shutil, sys; shutil.copyfileobj(sys.stdin.buffer, lzma.open(sys.stdout.buffer, "wb", preset=3))'; fi; }
+
 case $bin in
-*.xz) xz -dc "$bin" >"$work/mvpcc" || { say "cannot unpack $bin"; exit 1; } ;;
+*.xz) unxz_to "$bin" "$work/mvpcc" || { say "cannot unpack $bin"; exit 1; } ;;
 *) cp "$bin" "$work/mvpcc" || { say "cannot copy $bin"; exit 1; } ;;
 esac
 chmod +x "$work/mvpcc"
@@ -211,6 +217,6 @@ PY
 done
 
 say "packing"
-tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz -T0 -3 |
+tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz_stream |
     split -b 15M - "$out/run.tar.xz.part-"
 ls -l "$out" | tee -a "$log" >&2

@@ -4,7 +4,7 @@
 # stripped binary for carrying to a GPU machine.
 #
 #   scripts/build-cuda.sh [OUT_DIR]    build; OUT_DIR (default target/cuda-dist) gets the
-#                                      stripped mvpcc and mvpcc.xz
+#                                      stripped mvpcc packed as mvpcc.xz
 #   scripts/build-cuda.sh --check      only `cargo check` every target with the features (CI)
 #
 # Why each step (docs/gpu.md):
@@ -41,7 +41,7 @@ fi
 out=${1:-target/cuda-dist}
 cargo build --release --locked --features cuda,wgpu --target-dir target/cuda
 mkdir -p "$out"
-cp target/cuda/release/mvpcc "$out/mvpcc"
-strip "$out/mvpcc"
-xz -T0 -6 -c "$out/mvpcc" >"$out/mvpcc.xz"
-ls -l "$out/mvpcc" "$out/mvpcc.xz"
+stripped=target/cuda/mvpcc-stripped
+strip -o "$stripped" target/cuda/release/mvpcc
+xz -T0 -6 -c "$stripped" >"$out/mvpcc.xz"
+ls -l "$stripped" "$out/mvpcc.xz"

@@ -209,10 +209,9 @@ pub fn generator_for(
     config: &ModelConfig,
     device: &Device,
 ) -> Result<Generator, WeightsError> {
-    compatible(&read_config(bytes, Network::Generator)?, config)?;
-    let mut generator = config.init_generator(device)?;
-    apply(&mut generator, bytes)?;
-    Ok(generator)
+    network_for(bytes, Network::Generator, config, |c| {
+        c.init_generator(device)
+    })
 }
 
 /// [`generator_for`] for a discriminator's file.
@@ -221,10 +220,21 @@ pub fn discriminator_for(
     config: &ModelConfig,
     device: &Device,
 ) -> Result<Discriminator, WeightsError> {
-    compatible(&read_config(bytes, Network::Discriminator)?, config)?;
-    let mut discriminator = config.init_discriminator(device)?;
-    apply(&mut discriminator, bytes)?;
-    Ok(discriminator)
+    network_for(bytes, Network::Discriminator, config, |c| {
+        c.init_discriminator(device)
+    })
+}
+
+fn network_for<M: Module>(
+    bytes: &[u8],
+    network: Network,
+    config: &ModelConfig,
+    init: impl FnOnce(&ModelConfig) -> Result<M, ConfigError>,
+) -> Result<M, WeightsError> {
+    compatible(&read_config(bytes, network)?, config)?;
+    let mut module = init(config)?;
+    apply(&mut module, bytes)?;
+    Ok(module)
 }
 
 /// Whether weights made for `found` fit a network built from `expected`: every field but the

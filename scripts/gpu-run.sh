@@ -117,10 +117,15 @@ say "mvpcc $($mvpcc --version), device $device, out $out"
 if command -v nvidia-smi >/dev/null; then
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | tee -a "$profiles" >>"$log"
 fi
-# A Vulkan loader for wgpu, when the caller carried one (see docs/training.md).
+# A Vulkan loader for wgpu, when the caller carried one (docs/gpu.md), and the driver's own
+# Vulkan and EGL manifests where the loader would not find them.
 if ls .gl/*.deb >/dev/null 2>&1; then
     for f in .gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
+    icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+    egl=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+    [ -e $icd ] && export VK_DRIVER_FILES=$icd
+    [ -e $egl ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$egl
 fi
 
 # The data is made on the CPU cores while the GPU is profiled; niced, so the profiles' host
@@ -189,6 +194,12 @@ timeout -k 60 $((left + 60)) timeout -s INT "$left" "$mvpcc" train --data "$data
 status=$?
 [ $status -eq 0 ] || [ $status -eq 124 ] || say "train: exit status $status"
 
+# Packed before the timings below, so that a command stopped at its limit still brings the
+# leg back.
+say "packing"
+tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz_stream |
+    split -b 15M - "$out/run.tar.xz.part-"
+
 # The network's share of `complete` (encoder, fusion, decoder), median over the files after
 # the first, whose kernels are compiled and tuned on the way.
 cases=$work/cases
@@ -200,7 +211,7 @@ for model in built-in "$run"; do
     model_args=()
     [ "$model" = built-in ] || model_args=(--model "$model")
     say "\$ complete --input-dir $cases --device $device --jobs 1 --json ${model_args[*]}"
-    if timeout 150 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed" \
+    if timeout 90 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed" \
         --device "$device" --jobs 1 --json "${model_args[@]}" >"$work/complete.json" 2>>"$log"; then
         python3 - "$work/complete.json" "$model" >>"$profiles" <<'PY'
 import json, statistics, sys
@@ -215,8 +226,4 @@ PY
         echo "mvpcc complete, model $model: failed (see run.log)" >>"$profiles"
     fi
 done
-
-say "packing"
-tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz_stream |
-    split -b 15M - "$out/run.tar.xz.part-"
 ls -l "$out" | tee -a "$log" >&2

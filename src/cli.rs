@@ -8,6 +8,7 @@ use crate::device::DeviceChoice;
 use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
 use crate::mesh::SignedAxis;
+use crate::model::loss::Adversarial;
 use crate::model::{Channels, Formulation, ModelConfig, Padding, Preset};
 use crate::orient::OrientMode;
 use crate::scan::PartialKinds;
@@ -587,6 +588,31 @@ pub struct TrainArgs {
     /// discriminator's.
     #[arg(long)]
     pub vgg19: Option<PathBuf>,
+    /// Weight of the smooth L1 term [default: 50, the original code's; so are the others].
+    #[arg(long)]
+    pub loss_l1: Option<f64>,
+    /// Weight of the adversarial term [default: 0.1].
+    #[arg(long)]
+    pub loss_adversarial: Option<f64>,
+    /// Weight of the perceptual term [default: 0.1; the paper's text: 250].
+    #[arg(long)]
+    pub loss_perceptual: Option<f64>,
+    /// Weight of the style term [default: 250; the paper's text: 0.1].
+    #[arg(long)]
+    pub loss_style: Option<f64>,
+    /// Weight of the occupancy BCE term [default: 0.1].
+    #[arg(long)]
+    pub loss_bce: Option<f64>,
+    /// Weight of the total-variation term, further divided by the image side [default: 0.1].
+    #[arg(long)]
+    pub loss_tv: Option<f64>,
+    /// Adversarial loss [default: hinge].
+    #[arg(long, value_enum)]
+    pub adversarial: Option<Adversarial>,
+    /// First learning-rate stage (1-based) with the total-variation term [default: 2, as the
+    /// original].
+    #[arg(long)]
+    pub tv_from_stage: Option<usize>,
     /// Threads that load and render samples while the network trains.
     #[arg(long, default_value_t = 1)]
     pub workers: usize,

@@ -219,6 +219,36 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
 }
 
 #[test]
+fn loss_weights_and_the_adversarial_loss_are_options_kept_in_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    #[rustfmt::skip]
+    let options = [
+        "--loss-l1", "10", "--loss-adversarial", "0.2", "--loss-perceptual", "250",
+        "--loss-style", "0.1", "--loss-bce", "1", "--loss-tv", "0.5",
+        "--adversarial", "non-saturating", "--tv-from-stage", "1", "--val-every", "0",
+    ];
+    train(&run, 2, &options).assert().success();
+    let settings: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("train.json")).unwrap()).unwrap();
+    let loss = &settings["loss"];
+    let weights: Vec<f64> = [
+        "l1",
+        "adversarial",
+        "perceptual",
+        "style",
+        "occupancy",
+        "tv",
+    ]
+    .iter()
+    .map(|k| loss[k].as_f64().unwrap())
+    .collect();
+    assert_eq!(weights, [10.0, 0.2, 250.0, 0.1, 1.0, 0.5]);
+    assert_eq!(loss["adversarial_kind"], "non-saturating");
+    assert_eq!(settings["tv_from_stage"], 1);
+}
+
+#[test]
 fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
@@ -233,6 +263,13 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
         .failure()
         .stderr(predicate::str::contains(
             "batch: the run has 2, the options give 3",
+        ));
+    train(&run, 2, &["--loss-style", "1"])
+        .arg("--resume")
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "loss.style: the run has 250.0, the options give 1.0",
         ));
     // Rendering views larger than the data's leaves holes: said, not refused.
     base(&dir.path().join("larger"))

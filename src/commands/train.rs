@@ -62,7 +62,19 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     set!(batch <- batch, accumulate <- accumulate, stage_steps <- stage_steps,
         patience <- patience, val_every <- val_every, val_samples <- val_samples,
         val_fraction <- val_fraction, checkpoint_every <- checkpoint_every, keep <- keep,
-        log_every <- log_every, seed <- seed);
+        log_every <- log_every, seed <- seed, tv_from_stage <- tv_from_stage);
+    let loss = &mut s.loss;
+    for (weight, arg) in [
+        (&mut loss.l1, args.loss_l1),
+        (&mut loss.adversarial, args.loss_adversarial),
+        (&mut loss.perceptual, args.loss_perceptual),
+        (&mut loss.style, args.loss_style),
+        (&mut loss.occupancy, args.loss_bce),
+        (&mut loss.tv, args.loss_tv),
+    ] {
+        *weight = arg.unwrap_or(*weight);
+    }
+    loss.adversarial_kind = args.adversarial.unwrap_or(loss.adversarial_kind);
     if let Some(lr) = args.lr {
         s.stage_rates = vec![lr, lr / 10.0, lr / 100.0];
     }
@@ -81,17 +93,29 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     s
 }
 
-/// The first field of `new` that differs from `saved`, ignoring `except`.
+/// The first field of `new` that differs from `saved`, ignoring `except`, named down to the
+/// innermost field (`loss.style`).
 fn first_difference<T: serde::Serialize>(saved: &T, new: &T, except: &[&str]) -> Option<String> {
-    let (Ok(Value::Object(a)), Ok(Value::Object(b))) =
-        (serde_json::to_value(saved), serde_json::to_value(new))
-    else {
+    let (Ok(a), Ok(b)) = (serde_json::to_value(saved), serde_json::to_value(new)) else {
         return None;
+    };
+    differing_field(&a, &b, except, "")
+}
+
+fn differing_field(a: &Value, b: &Value, except: &[&str], path: &str) -> Option<String> {
+    let (Value::Object(a), Value::Object(b)) = (a, b) else {
+        return (a != b).then(|| format!("{path}: the run has {a}, the options give {b}"));
     };
     a.iter()
         .filter(|(k, _)| !except.contains(&k.as_str()))
-        .find(|(k, v)| b.get(*k) != Some(v))
-        .map(|(k, v)| format!("{k}: the run has {v}, the options give {}", b[k]))
+        .find_map(|(k, v)| {
+            let inner = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}.{k}")
+            };
+            differing_field(v, b.get(k).unwrap_or(&Value::Null), &[], &inner)
+        })
 }
 
 fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {

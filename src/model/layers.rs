@@ -91,7 +91,7 @@ pub struct ConvNorm {
 pub enum Formulation {
     /// Sliced on the CPU, plain on any other device.
     Auto,
-    /// [`reflect_pad`] from slices and [`shifted_conv`] for wide stride-1 layers.
+    /// `reflect_pad` from slices and `shifted_conv` for wide stride-1 layers.
     Sliced,
     /// Burn's `conv2d` and `PadMode::Reflect`.
     Plain,

@@ -70,6 +70,14 @@ pub struct TrainSettings {
     /// The weights the run started from (`--init`); a fresh initialization when absent.
     #[serde(default)]
     pub init: Option<InitWeights>,
+    /// The first stage (1-based) whose loss has the total-variation term.
+    #[serde(default = "default_tv_from_stage")]
+    pub tv_from_stage: usize,
+}
+
+/// The original adds total variation from its second stage on.
+fn default_tv_from_stage() -> usize {
+    2
 }
 
 /// Trained weights a new run starts from, with fresh optimizers.
@@ -199,6 +207,7 @@ impl TrainSettings {
             optim: GanOptimConfig::new(),
             vgg19: None,
             init: None,
+            tv_from_stage: default_tv_from_stage(),
         }
     }
 
@@ -680,8 +689,8 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         let started = Instant::now();
         interval.wait += (started - waited).as_secs_f64();
         let rate = settings.stage_rates[state.stage];
-        // The total-variation term joins from the second stage on, as in the original.
-        gan.weights.tv = if state.stage == 0 {
+        // The total-variation term joins from stage `tv_from_stage` (1-based) on.
+        gan.weights.tv = if state.stage + 1 < settings.tv_from_stage {
             0.0
         } else {
             settings.loss.tv

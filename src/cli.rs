@@ -223,8 +223,9 @@ pub struct CompleteArgs {
     /// (footprint rectangle + height heuristic), learned (the orientation network), combined
     /// (rectangle axis, network's front), none (keep the input's axes), or the heading in
     /// degrees (the front's direction, counter-clockwise from +x seen from above).
-    #[arg(long, default_value = "auto", allow_negative_numbers = true)]
-    pub orient: OrientMode,
+    /// [default: auto; none with --paper]
+    #[arg(long, allow_negative_numbers = true)]
+    pub orient: Option<OrientMode>,
     /// Orientation network weights (train-orient's orienter.safetensors) [default: built in].
     #[arg(long)]
     pub orienter: Option<PathBuf>,
@@ -232,6 +233,12 @@ pub struct CompleteArgs {
     /// other objects before completing; the counts are reported.
     #[arg(long)]
     pub clean: bool,
+    /// The paper's pipeline exactly, for its tables: the input's own box, projection into the
+    /// model's views, inpainting, 3×3 erosion, re-projection, outlier filter (k 20, σ 5), back
+    /// to the input's frame. No cleaning, no orientation unless --orient names one, no
+    /// symmetric frame, no mirror images, no snapping, the measured points not kept.
+    #[arg(long, conflicts_with_all = ["clean", "keep_input", "symmetry", "no_snap", "method"])]
+    pub paper: bool,
     /// Keep the measured points and add completed points only where they are missing (the
     /// default).
     #[arg(long, overrides_with = "no_keep_input")]

@@ -66,6 +66,26 @@ pub struct Options {
     /// Also add the measured points' mirror images (network method; the mirror method always
     /// does).
     pub symmetry: bool,
+    /// Fit the network's box to the measured points and their mirror images, centred on the
+    /// symmetry plane as the training objects are; otherwise the measured points' own box.
+    pub symmetric_frame: bool,
+}
+
+impl Options {
+    /// The paper's pipeline and nothing else: the measured points' own box, projection,
+    /// inpainting, 3×3 erosion, re-projection, SOR (k 20, σ 5), back to the input's frame; no
+    /// mirror images, no snapping, the measured points not kept.
+    pub fn paper(up: UpAxis, heading: Option<f64>) -> Options {
+        Options {
+            up,
+            heading,
+            snap: false,
+            keep_input: false,
+            symmetry: false,
+            symmetric_frame: false,
+            ..Options::default()
+        }
+    }
 }
 
 /// What `mvpcc complete IN OUT` does for a y-up input without options.
@@ -83,6 +103,7 @@ impl Default for Options {
             keep_input: true,
             merge_pixels: 4.0,
             symmetry: true,
+            symmetric_frame: true,
         }
     }
 }
@@ -158,8 +179,15 @@ pub fn complete(
         .iter()
         .map(|&p| fitted.to_normalized(p))
         .collect();
-    let plane = find_plane(&fitted_points);
-    let frame = symmetric_frame(&fitted, &fitted_points, plane);
+    let wants_plane = options.symmetric_frame
+        || options.method == Method::Mirror
+        || (options.method == Method::Network && options.symmetry);
+    let plane = wants_plane.then(|| find_plane(&fitted_points)).flatten();
+    let frame = if options.symmetric_frame {
+        symmetric_frame(&fitted, &fitted_points, plane)
+    } else {
+        fitted.clone()
+    };
     let measured: Vec<[f64; 3]> = input
         .positions
         .iter()
@@ -469,6 +497,41 @@ mod tests {
 
     fn flags(cloud: &PointCloud) -> &[f64] {
         &cloud.attribute(SYNTHETIC).unwrap().values
+    }
+
+    /// `--paper` is the paper's steps in the paper's order and nothing else: the same stage
+    /// functions composed by hand give the same points, to the bit.
+    #[test]
+    fn the_paper_pipeline_is_its_steps_and_nothing_else() {
+        let input = partial();
+        let inpainter = tiny_inpainter();
+        let options = Options::paper(UpAxis::Y, None);
+        let done = complete(&input, Some(&inpainter), &options).unwrap();
+
+        let frame = Frame::fit(&input, UpAxis::Y).unwrap();
+        let points: Vec<[f32; 3]> = input
+            .positions
+            .iter()
+            .map(|&p| frame.to_normalized(p).map(|c| c as f32))
+            .collect();
+        let cameras = Camera::set(&options.views, inpainter.config().size).unwrap();
+        let views = project(&points, input.colors.as_deref(), &cameras);
+        let inpainted = inpainter.inpaint(&[views]).unwrap().pop().unwrap();
+        let eroded = reproject(&inpainted, ReprojectOptions::default());
+        let kept = eroded.filter(&inliers(&eroded.positions, SorParams::default()));
+        let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
+
+        assert_eq!(done.cloud.positions, expected);
+        assert!(
+            done.plane.is_none() && done.mirrored == 0,
+            "no symmetry search"
+        );
+        assert!(
+            flags(&done.cloud).iter().all(|&f| f == 1.0),
+            "no measured point kept"
+        );
+        assert_eq!(ReprojectOptions::default().erode, 3);
+        assert_eq!((options.sor.k, options.sor.std_mul), (20, 5.0));
     }
 
     #[test]

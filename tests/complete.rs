@@ -332,3 +332,59 @@ fn odd_inputs_warn_and_tiny_ones_fail_cleanly() {
         .stderr(predicate::str::contains("none"));
     assert!(!output.exists());
 }
+
+/// `--paper` on the real MLS scans with the built-in model: the paper's pipeline alone (no
+/// orientation, no plane, no mirror images, only the network's points), in the scan's frame.
+#[test]
+fn the_paper_pipeline_runs_on_the_reference_scans() {
+    let mls = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/clouds/mls");
+    if !mls.is_dir() {
+        eprintln!("skipped: {} is absent", mls.display());
+        return;
+    }
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out");
+    let assert = mvpcc()
+        .args([
+            "complete",
+            "--paper",
+            "--input-dir",
+            s(&mls),
+            "--output-dir",
+            s(&out),
+        ])
+        .args(["--up", "z", "--json"])
+        .assert()
+        .success();
+    let reports: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    let reports = reports.as_array().unwrap();
+    assert_eq!(reports.len(), 4);
+    for r in reports {
+        assert_eq!(r["orientation"]["method"], "none", "{r}");
+        assert!(r["symmetry_plane"].is_null() && r["mirrored"] == 0, "{r}");
+        assert_eq!(
+            r["added"], r["output_points"],
+            "only the network's points: {r}"
+        );
+        assert!(r["output_points"].as_u64().unwrap() > 1000, "{r}");
+    }
+    let input = read_cloud(&mls.join("CAR175.pcd"), None).unwrap().cloud;
+    let output = read_cloud(&out.join("CAR175.pcd"), None).unwrap().cloud;
+    let b = input.bounds().unwrap();
+    let (lo, hi) = (b.min, b.max);
+    let near = output
+        .positions
+        .iter()
+        .filter(|p| (0..3).all(|i| p[i] > lo[i] - 1.0 && p[i] < hi[i] + 1.0))
+        .count();
+    assert!(
+        near * 10 >= output.len() * 9,
+        "{near} of {} near the scan",
+        output.len()
+    );
+    mvpcc()
+        .args(["complete", "--paper", "--clean", "a.ply", "b.ply"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("cannot be used with"));
+}

@@ -92,11 +92,17 @@ fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
     }
 }
 
-/// `--orient`, except for the identity method, whose output does not depend on the frame.
+/// `--orient` (auto by default, none with `--paper`), except for the identity method, whose
+/// output does not depend on the frame.
 fn orient_mode(args: &CompleteArgs) -> OrientMode {
+    let default = if args.paper {
+        OrientMode::None
+    } else {
+        OrientMode::Auto
+    };
     match args.method {
         Method::Identity => OrientMode::None,
-        Method::Mirror | Method::Network => args.orient,
+        Method::Mirror | Method::Network => args.orient.unwrap_or(default),
     }
 }
 
@@ -106,6 +112,17 @@ fn up_axis(args: &CompleteArgs, input: &Path) -> UpAxis {
 }
 
 fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
+    if args.paper {
+        return Options {
+            views: args.views.0.clone(),
+            erode: args.erode,
+            sor: SorParams {
+                k: args.sor.sor_k,
+                std_mul: args.sor.sor_std,
+            },
+            ..Options::paper(up_axis(args, input), heading)
+        };
+    }
     Options {
         method: args.method,
         up: up_axis(args, input),
@@ -121,6 +138,7 @@ fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
         keep_input: !args.no_keep_input,
         merge_pixels: args.merge_pixels,
         symmetry: !args.no_symmetry,
+        symmetric_frame: true,
     }
 }
 

@@ -239,6 +239,11 @@ pub struct CompleteArgs {
     /// symmetric frame, no mirror images, no snapping, the measured points not kept.
     #[arg(long, conflicts_with_all = ["clean", "keep_input", "symmetry", "no_snap", "method"])]
     pub paper: bool,
+    /// Write the network's input and inpainted views in the dataset's format (`DIR/input/`,
+    /// `DIR/output/`; with --input-dir, `DIR/<relative path without extension>/…`), for
+    /// `eval --pred-views/--gt-views`.
+    #[arg(long)]
+    pub save_views: Option<PathBuf>,
     /// Keep the measured points and add completed points only where they are missing (the
     /// default).
     #[arg(long, overrides_with = "no_keep_input")]

@@ -14,7 +14,7 @@ use crate::filter::{inliers, SorParams};
 use crate::frame::{Frame, FrameError, UpAxis};
 use crate::inpaint::{InpaintError, Inpainter};
 use crate::knn::KnnIndex;
-use crate::projection::project;
+use crate::projection::{project, ViewImages};
 use crate::reprojection::{reproject, snap_to_rays, ReprojectOptions};
 use crate::symmetry::{find_plane, mirror, Plane};
 use nalgebra::{Matrix3, SymmetricEigen};
@@ -69,6 +69,8 @@ pub struct Options {
     /// Fit the network's box to the measured points and their mirror images, centred on the
     /// symmetry plane as the training objects are; otherwise the measured points' own box.
     pub symmetric_frame: bool,
+    /// Return the network's input and output views in the [`Completion`].
+    pub keep_views: bool,
 }
 
 impl Options {
@@ -104,6 +106,7 @@ impl Default for Options {
             merge_pixels: 4.0,
             symmetry: true,
             symmetric_frame: true,
+            keep_views: false,
         }
     }
 }
@@ -158,6 +161,17 @@ pub struct Completion {
     /// Why the input looks unlike what the model was trained on.
     pub warnings: Vec<String>,
     pub timings: Timings,
+    /// The views the network read and wrote, when [`Options::keep_views`] asked for them.
+    pub views: Option<NetworkViews>,
+}
+
+/// The network's views of one object, in the dataset's format once written.
+#[derive(Debug, Clone)]
+pub struct NetworkViews {
+    /// The measured points projected into the model's cameras.
+    pub input: ViewImages,
+    /// What the generator made of them, before snapping.
+    pub output: ViewImages,
 }
 
 /// Completes `input`. `inpainter` is needed by the network method only.
@@ -238,6 +252,7 @@ pub fn complete(
 
     let mut filtered_out = 0;
     let mut network_cloud: Option<Vec<[f64; 3]>> = None;
+    let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
         let config = inpainter.config();
@@ -250,16 +265,23 @@ pub fn complete(
         let start = Instant::now();
         let cameras = Camera::set(&options.views, config.size)?;
         let points: Vec<[f32; 3]> = measured.iter().map(|p| p.map(|c| c as f32)).collect();
-        let views = project(&points, input.colors.as_deref(), &cameras);
+        let batch = [project(&points, input.colors.as_deref(), &cameras)];
         timings.projection = start.elapsed();
 
-        let (mut out, stages) = inpainter.inpaint_timed(&[views])?;
+        let (mut out, stages) = inpainter.inpaint_timed(&batch)?;
         timings.encoder = stages.encoder;
         timings.fusion = stages.fusion;
         timings.decoder = stages.decoder;
 
         let start = Instant::now();
         let mut inpainted = out.pop().expect("one object in, one out");
+        if options.keep_views {
+            let [input] = batch;
+            views = Some(NetworkViews {
+                input,
+                output: inpainted.clone(),
+            });
+        }
         if options.snap {
             snap_to_rays(&mut inpainted, &cameras);
         }
@@ -335,6 +357,7 @@ pub fn complete(
         plane,
         warnings,
         timings,
+        views,
     })
 }
 

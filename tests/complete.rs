@@ -388,3 +388,47 @@ fn the_paper_pipeline_runs_on_the_reference_scans() {
         .failure()
         .stderr(predicate::str::contains("cannot be used with"));
 }
+
+#[test]
+fn saved_views_are_the_datasets_format_and_eval_scores_them() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let input = write(&dir, "scan.ply", &scan(3));
+    let views = dir.path().join("views");
+    mvpcc()
+        .args(["complete", s(&input), s(&dir.path().join("out.ply"))])
+        .args(["--model", s(&model), "--save-views", s(&views)])
+        .assert()
+        .success();
+    for side in ["input", "output"] {
+        for view in [5, 6, 7, 8] {
+            for kind in ["locations", "color"] {
+                let png = views.join(side).join(format!("{kind}_{view:03}.png"));
+                assert!(png.is_file(), "{} missing", png.display());
+            }
+        }
+    }
+    let scores = mvpcc()
+        .args(["eval", "--metrics", "psnr,ssim,mae", "--json"])
+        .args(["--pred-views", s(&views.join("output"))])
+        .args(["--gt-views", s(&views.join("input"))])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let scores = String::from_utf8(scores).unwrap();
+    assert!(scores.contains("psnr"), "{scores}");
+    // The mirror method runs no network: said, not failed.
+    mvpcc()
+        .args(["complete", s(&input), s(&dir.path().join("m.ply"))])
+        .args([
+            "--method",
+            "mirror",
+            "--save-views",
+            s(&dir.path().join("none")),
+        ])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("no views to save"));
+}

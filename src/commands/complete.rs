@@ -11,6 +11,7 @@ use crate::inpaint::Inpainter;
 use crate::io::{atomic_write, check_output, write_cloud, Format};
 use crate::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
 use crate::preview::{render, Layer};
+use crate::views::write_views;
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
 use serde_json::{json, Value};
@@ -41,7 +42,8 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     };
     match (&args.input, &args.output, &args.input_dir, &args.output_dir) {
         (Some(input), Some(output), _, _) => {
-            let report = complete_file(input, output, &args, &models, log)?;
+            let views = args.save_views.clone();
+            let report = complete_file(input, output, views, &args, &models, log)?;
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
@@ -120,6 +122,7 @@ fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
                 k: args.sor.sor_k,
                 std_mul: args.sor.sor_std,
             },
+            keep_views: args.save_views.is_some(),
             ..Options::paper(up_axis(args, input), heading)
         };
     }
@@ -139,6 +142,7 @@ fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
         merge_pixels: args.merge_pixels,
         symmetry: !args.no_symmetry,
         symmetric_frame: true,
+        keep_views: args.save_views.is_some(),
     }
 }
 
@@ -163,6 +167,7 @@ fn seconds(d: Duration) -> f64 {
 fn complete_file(
     input: &Path,
     output: &Path,
+    views: Option<PathBuf>,
     args: &CompleteArgs,
     models: &Models,
     log: Log,
@@ -211,6 +216,9 @@ fn complete_file(
     let write = start.elapsed();
     if let Some(path) = &args.preview {
         write_preview(path, &cloud, &done)?;
+    }
+    if let Some(dir) = &views {
+        save_views(dir, input, &done, log)?;
     }
     let total = total.elapsed();
     log.info(format!(
@@ -273,6 +281,24 @@ fn complete_file(
             "warnings": done.warnings,
             "seconds": timings,
     }))
+}
+
+/// The network's views as `DIR/input/` and `DIR/output/`; said so when the method ran none.
+fn save_views(dir: &Path, input: &Path, done: &Completion, log: Log) -> anyhow::Result<()> {
+    let Some(views) = &done.views else {
+        log.warn(format!(
+            "{}: --save-views: the method ran no network, so there are no views to save",
+            input.display()
+        ));
+        return Ok(());
+    };
+    for (name, images) in [("input", &views.input), ("output", &views.output)] {
+        let dir = dir.join(name);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        write_views(&dir, images)?;
+    }
+    Ok(())
 }
 
 fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::Result<()> {
@@ -402,7 +428,13 @@ fn batch(
                     .parent()
                     .map_or(Ok(()), std::fs::create_dir_all)
                     .with_context(|| format!("{}: cannot create", output.display()))
-                    .and_then(|()| complete_file(&input, &output, args, models, quiet_file));
+                    .and_then(|()| {
+                        let views = args
+                            .save_views
+                            .as_ref()
+                            .map(|d| d.join(relative.with_extension("")));
+                        complete_file(&input, &output, views, args, models, quiet_file)
+                    });
                 results.lock().expect("no worker panics").push((i, result));
                 bar.inc(1);
             });

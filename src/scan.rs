@@ -110,6 +110,9 @@ pub enum PartialKinds {
     Cameras,
     /// The profile scanner only.
     Scanner,
+    /// What one camera of the rig sees: the protocol of the paper's real-MLS experiment
+    /// (Table 3).
+    SingleCamera,
 }
 
 /// The ranges partial samples are drawn from.
@@ -146,12 +149,15 @@ pub fn partial(mesh: &Mesh, params: &PartialParams, rng: &mut Lcg) -> (PartialSp
         params.max_points.max(params.min_points) as f64,
     );
     let use_cameras = match params.kinds {
-        PartialKinds::Cameras => true,
+        PartialKinds::Cameras | PartialKinds::SingleCamera => true,
         PartialKinds::Scanner => false,
         PartialKinds::Both => rng.chance(0.5),
     };
     let (mut spec, probe) = if use_cameras {
-        let count = 1 + rng.below(3);
+        let count = match params.kinds {
+            PartialKinds::SingleCamera => 1,
+            _ => 1 + rng.below(3),
+        };
         let mut pool = PARTIAL_CAMERAS.to_vec();
         let cameras: Vec<usize> = (0..count)
             .map(|_| pool.remove(rng.below(pool.len())))
@@ -621,5 +627,25 @@ mod tests {
             let (spec, s) = partial(&m, &narrow, &mut Lcg::new(seed));
             assert!((6_600..15_000).contains(&s.len()), "{spec:?}: {}", s.len());
         }
+    }
+
+    #[test]
+    fn the_single_camera_protocol_sees_through_one_camera_of_the_rig() {
+        let m = normalized_car(5);
+        let params = PartialParams {
+            kinds: PartialKinds::SingleCamera,
+            ..PartialParams::default()
+        };
+        let mut seen = std::collections::BTreeSet::new();
+        for seed in 0..8 {
+            let (spec, points) = partial(&m, &params, &mut Lcg::new(seed));
+            let PartialSpec::Cameras { cameras, .. } = spec else {
+                panic!("{spec:?}");
+            };
+            assert_eq!(cameras.len(), 1);
+            assert!(PARTIAL_CAMERAS.contains(&cameras[0]) && !points.is_empty());
+            seen.insert(cameras[0]);
+        }
+        assert!(seen.len() > 2, "cameras drawn: {seen:?}");
     }
 }

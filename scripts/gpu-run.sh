@@ -211,19 +211,24 @@ for model in built-in "$run"; do
     model_args=()
     [ "$model" = built-in ] || model_args=(--model "$model")
     say "\$ complete --input-dir $cases --device $device --jobs 1 --json ${model_args[*]}"
-    if timeout 90 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed" \
-        --device "$device" --jobs 1 --json "${model_args[@]}" >"$work/complete.json" 2>>"$log"; then
-        python3 - "$work/complete.json" "$model" >>"$profiles" <<'PY'
+    # A file that fails is listed in the report with its error; the others still count.
+    timeout 90 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed" \
+        --device "$device" --jobs 1 --json "${model_args[@]}" >"$work/complete.json" 2>>"$log"
+    python3 - "$work/complete.json" "$model" >>"$profiles" <<'PY'
 import json, statistics, sys
-seconds = [r["seconds"] for r in json.load(open(sys.argv[1])) if "seconds" in r]
+try:
+    reports = json.load(open(sys.argv[1]))
+except ValueError:
+    reports = []
+seconds = [r["seconds"] for r in reports if "seconds" in r]
+failed = sum("error" in r for r in reports)
+line = f"mvpcc complete, model {sys.argv[2]}, {len(seconds)} files completed, {failed} failed"
 seconds = seconds[1:] or seconds
-net = [1e3 * (s["encoder"] + s["fusion"] + s["decoder"]) for s in seconds]
-total = [1e3 * s["total"] for s in seconds]
-print(f"mvpcc complete, model {sys.argv[2]}, {len(seconds)} files: "
-      f"network_ms_median={statistics.median(net):.1f} total_ms_median={statistics.median(total):.1f}")
+if seconds:
+    net = statistics.median(1e3 * (s["encoder"] + s["fusion"] + s["decoder"]) for s in seconds)
+    total = statistics.median(1e3 * s["total"] for s in seconds)
+    line += f": network_ms_median={net:.1f} total_ms_median={total:.1f}"
+print(line + ("" if reports else " (no report: see run.log)"))
 PY
-    else
-        echo "mvpcc complete, model $model: failed (see run.log)" >>"$profiles"
-    fi
 done
 ls -l "$out" | tee -a "$log" >&2

@@ -511,9 +511,12 @@ mod tests {
     fn sliced_and_plain_formulations_agree_in_value_and_gradient() {
         let device = Device::flex().autodiff();
         let planes = SHIFTED_MIN_INPUT_PLANES;
+        // A varied input: on a constant one, reflection keeps every map constant and instance
+        // norm divides rounding noise by a near-zero spread.
+        let input = Tensor::<4>::random([1, 7, 10, 10], Distribution::Default, &device);
         let run = |formulation: Formulation, block: &ResBlock, head: &ConvNorm| {
             formulation.set();
-            let x = Tensor::<4>::ones([1, 7, 10, 10], &device).require_grad();
+            let x = input.clone().detach().require_grad();
             let y = block.forward(head.forward(x.clone(), &mut NoProbe), &mut NoProbe);
             let grads = y.clone().powf_scalar(2.0).sum().backward();
             let dx = x.grad(&grads).unwrap();
@@ -538,10 +541,16 @@ mod tests {
             );
             let (ys, dxs) = run(Formulation::Sliced, &block, &head);
             let (yp, dxp) = run(Formulation::Plain, &block, &head);
-            let err = (ys - yp).abs().max().into_scalar::<f32>();
-            assert!(err < 1e-4, "{padding:?} value: {err}");
-            let err = (dxs - dxp).abs().max().into_scalar::<f32>();
-            assert!(err < 1e-3, "{padding:?} gradient: {err}");
+            // Relative to the largest entry, since the random weights set the scale: measured
+            // 4e-7 to 8e-7 apart (rounding of sums taken in another order).
+            let relative = |a: Tensor<4>, b: Tensor<4>| {
+                let scale = a.clone().abs().max().into_scalar::<f32>().max(1e-6);
+                (a - b).abs().max().into_scalar::<f32>() / scale
+            };
+            let err = relative(ys, yp);
+            assert!(err < 1e-5, "{padding:?} value: {err}");
+            let err = relative(dxs, dxp);
+            assert!(err < 1e-5, "{padding:?} gradient: {err}");
         }
     }
 

@@ -35,11 +35,7 @@ pub struct DeviceError {
 pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
     let explicit = |backend, opened: Result<(Device, String), String>| {
         opened
-            .map(|(device, description)| Opened {
-                device,
-                description,
-                fallback: None,
-            })
+            .map(found)
             .map_err(|why| DeviceError { backend, why })
     };
     match choice {
@@ -47,6 +43,14 @@ pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
         DeviceChoice::Cuda => explicit("cuda", open_cuda()),
         DeviceChoice::Wgpu => explicit("wgpu", open_wgpu()),
         DeviceChoice::Gpu => Ok(open_any_gpu()),
+    }
+}
+
+fn found((device, description): (Device, String)) -> Opened {
+    Opened {
+        device,
+        description,
+        fallback: None,
     }
 }
 
@@ -59,24 +63,9 @@ fn cpu(fallback: Option<String>) -> Opened {
 }
 
 fn open_any_gpu() -> Opened {
-    let cuda = match open_cuda() {
-        Ok((device, description)) => {
-            return Opened {
-                device,
-                description,
-                fallback: None,
-            }
-        }
-        Err(why) => why,
-    };
-    match open_wgpu() {
-        Ok((device, description)) => Opened {
-            device,
-            description,
-            fallback: None,
-        },
-        Err(wgpu) => cpu(Some(format!("{cuda}; {wgpu}; running on the CPU"))),
-    }
+    open_cuda()
+        .or_else(|cuda| open_wgpu().map_err(|wgpu| format!("{cuda}; {wgpu}; running on the CPU")))
+        .map_or_else(|why| cpu(Some(why)), found)
 }
 
 #[cfg(feature = "cuda")]

@@ -1,6 +1,7 @@
 //! `mvpcc profile`: times the generator's forward pass, or with `--train` whole GAN training
 //! steps, on random input and breaks the time down by layer kind or step phase, so a user can
-//! pick a model shape and device, and anyone can reproduce the speed figures in docs/speed.md.
+//! pick a model shape and device, and anyone can reproduce the speed figures in the README and
+//! docs/gpu.md.
 
 use super::Log;
 use crate::cli::ProfileArgs;

@@ -257,20 +257,19 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
         predicate::str::contains("already holds a training run")
             .and(predicate::str::contains("--resume")),
     );
-    train(&run, 2, &["--batch", "3"])
-        .arg("--resume")
-        .assert()
-        .failure()
-        .stderr(predicate::str::contains(
-            "batch: the run has 2, the options give 3",
-        ));
-    train(&run, 2, &["--loss-style", "1"])
-        .arg("--resume")
-        .assert()
-        .failure()
-        .stderr(predicate::str::contains(
+    for (change, said) in [
+        (["--batch", "3"], "batch: the run has 2, the options give 3"),
+        (
+            ["--loss-style", "1"],
             "loss.style: the run has 250.0, the options give 1.0",
-        ));
+        ),
+    ] {
+        train(&run, 2, &change)
+            .arg("--resume")
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(said));
+    }
     // Rendering views larger than the data's leaves holes: said, not refused.
     base(&dir.path().join("larger"))
         .args([

@@ -502,6 +502,26 @@ struct Validator {
 }
 
 impl Validator {
+    /// [`Validator::run`], with the scores shown and appended to the log as `(step, stage)`'s.
+    fn run_logged(
+        &self,
+        gan: &Gan,
+        run: &Path,
+        (step, stage): (u64, usize),
+        monitor: &mut dyn Monitor,
+        log: &mut RunLog,
+    ) -> Result<Scores, TrainError> {
+        let scores = self.run(gan, run, step)?;
+        let record = LogRecord::Validation {
+            step,
+            stage,
+            scores: scores.clone(),
+        };
+        monitor.record(&record);
+        log.push(record)?;
+        Ok(scores)
+    }
+
     fn run(&self, gan: &Gan, run: &Path, step: u64) -> Result<Scores, TrainError> {
         let inpainter = Inpainter::new(
             gan.generator.valid(),
@@ -724,15 +744,8 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
             .as_ref()
             .filter(|_| settings.val_every > 0 && state.step.is_multiple_of(settings.val_every))
         {
-            let scores = v.run(&gan, run, state.step)?;
+            let scores = v.run_logged(&gan, run, (state.step, state.stage), monitor, &mut log)?;
             improved = advance_on_validation(&mut state, &scores);
-            let record = LogRecord::Validation {
-                step: state.step,
-                stage: state.stage,
-                scores: scores.clone(),
-            };
-            monitor.record(&record);
-            log.push(record)?;
             log.draw(run)?;
             last_scores = Some(scores);
         }
@@ -770,17 +783,10 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
         .iter()
         .any(|r| matches!(r, LogRecord::Validation { step, .. } if *step == state.step));
     if let Some(v) = validator.as_ref().filter(|_| state.step > 0 && !validated) {
-        let scores = v.run(&gan, run, state.step)?;
-        let record = LogRecord::Validation {
-            step: state.step,
-            stage: state
-                .stage
-                .min(settings.stage_rates.len().saturating_sub(1)),
-            scores: scores.clone(),
-        };
-        monitor.record(&record);
-        log.push(record)?;
-        last_scores = Some(scores);
+        let stage = state
+            .stage
+            .min(settings.stage_rates.len().saturating_sub(1));
+        last_scores = Some(v.run_logged(&gan, run, (state.step, stage), monitor, &mut log)?);
     }
     let dir = match &last_checkpoint {
         Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),

@@ -1,6 +1,7 @@
 //! Command-line definitions (clap derive). Each subcommand's arguments live beside the others
 //! here; what they do lives in [`crate::commands`].
 
+use crate::batch::Shard;
 use crate::camera::{parse_view_set, DEFAULT_VIEWS};
 use crate::complete::Method;
 use crate::data::CloudPolicy;
@@ -186,20 +187,33 @@ impl std::fmt::Display for ViewList {
 #[derive(Debug, Args)]
 pub struct CompleteArgs {
     /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ).
-    #[arg(required_unless_present = "input_dir", conflicts_with = "input_dir")]
+    #[arg(required_unless_present_any = ["input_dir", "list"], conflicts_with_all = ["input_dir", "list"])]
     pub input: Option<PathBuf>,
     /// Completed cloud; its extension picks the format (the input's format when it names none).
-    #[arg(required_unless_present = "input_dir")]
+    #[arg(required_unless_present_any = ["input_dir", "list"])]
     pub output: Option<PathBuf>,
-    /// Complete every cloud file under this directory (recursively).
+    /// Complete every cloud file under this directory (recursively; hidden files skipped, each
+    /// file once however many links lead to it).
     #[arg(long, requires = "output_dir")]
     pub input_dir: Option<PathBuf>,
     /// Where batch results go, at the same relative paths (created if missing).
-    #[arg(long, requires = "input_dir")]
+    #[arg(long)]
     pub output_dir: Option<PathBuf>,
+    /// Batch: complete the files this text file lists, one per line, relative to --input-dir
+    /// (or to the current directory without one) or absolute under --input-dir.
+    #[arg(long, requires = "output_dir")]
+    pub list: Option<PathBuf>,
     /// Batch: only files whose name matches this pattern (`*` and `?` wildcards).
-    #[arg(long, requires = "input_dir")]
+    #[arg(long, requires = "input_dir", conflicts_with = "list")]
     pub include: Option<String>,
+    /// Batch: take only part I of N (I from 0 to N-1), chosen by a hash of each file's relative
+    /// path, so N jobs with 0/N … N-1/N complete every file exactly once.
+    #[arg(long, value_name = "I/N", requires = "output_dir")]
+    pub shard: Option<Shard>,
+    /// Batch: leave files whose output already exists (outputs are written whole or not at
+    /// all, so an existing one is complete).
+    #[arg(long, requires = "output_dir")]
+    pub skip_existing: bool,
     /// Batch: files completed at once.
     #[arg(long, default_value_t = 1)]
     pub jobs: usize,
@@ -274,7 +288,7 @@ pub struct CompleteArgs {
     #[arg(long, default_value_t = 4.0)]
     pub merge_pixels: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
-    #[arg(long, conflicts_with = "input_dir")]
+    #[arg(long, conflicts_with = "output_dir")]
     pub preview: Option<PathBuf>,
     /// Print the time of each stage (the paper's Table 4 breakdown).
     #[arg(long)]
@@ -415,6 +429,11 @@ pub struct PrepareArgs {
     /// Generate this many street objects into OUT/meshes first and prepare those.
     #[arg(long)]
     pub synth: Option<usize>,
+    /// Prepare only part I of N of the meshes (I from 0 to N-1, chosen by a hash of category
+    /// and name), so N jobs sharing OUT prepare each mesh once; a last run without --shard
+    /// finds them all prepared and writes the manifest.
+    #[arg(long, value_name = "I/N", requires = "meshes")]
+    pub shard: Option<Shard>,
     #[command(flatten)]
     pub synth_options: SynthOptions,
     /// Output data directory (created if missing; an interrupted run resumes in it).

@@ -58,6 +58,10 @@ fn apply(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
 }
 
+fn transposed(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[j][i]))
+}
+
 fn apply_transposed(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| m[0][i] * v[0] + m[1][i] * v[1] + m[2][i] * v[2])
 }
@@ -128,6 +132,26 @@ impl Frame {
             extent,
             rotation,
         })
+    }
+
+    /// Refuses a frame read from a file that cannot map points back: a non-finite centre, an
+    /// extent that is not positive, or a rotation that is not one (rows orthonormal to 1e-6).
+    pub fn check(&self) -> Result<(), String> {
+        if !self.center.iter().all(|c| c.is_finite()) {
+            return Err("the frame's centre is not finite".into());
+        }
+        if !(self.extent.is_finite() && self.extent > 0.0) {
+            return Err(format!("the frame's extent {} is not positive", self.extent));
+        }
+        let gram = mat_mul(&self.rotation, &transposed(&self.rotation));
+        let off = (0..3)
+            .flat_map(|i| (0..3).map(move |j| (i, j)))
+            .map(|(i, j)| (gram[i][j] - f64::from(u8::from(i == j))).abs())
+            .fold(0.0, f64::max);
+        if off.is_nan() || off > 1e-6 {
+            return Err("the frame's rotation is not a rotation".into());
+        }
+        Ok(())
     }
 
     pub fn to_normalized(&self, p: [f64; 3]) -> [f64; 3] {

@@ -11,6 +11,7 @@
 //! segmentation left around the vehicle, [`orient`] finding which way it faces, [`symmetry`]
 //! finding its plane of symmetry and [`preview`] drawing the result.
 
+pub mod batch;
 pub mod camera;
 pub mod clean;
 pub mod cli;

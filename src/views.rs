@@ -3,9 +3,11 @@
 //! camera NNN, so the original dataset and ours are interchangeable.
 
 use crate::camera::RIG_SIZE;
+use crate::frame::{Frame, UpAxis};
 use crate::io::atomic_write;
 use crate::projection::{ViewImages, CHANNELS};
 use image::ImageEncoder;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -43,6 +45,52 @@ pub fn encode_coordinate(c: f32) -> u16 {
 /// unbiased, and re-encoding a decoded value gives back the same code despite f32 rounding.
 pub fn decode_coordinate(v: u16) -> f32 {
     (COORD_MIN + COORD_RANGE * (v as f64 - CODE_MIN + 0.5) / CODE_RANGE) as f32
+}
+
+/// What `project` records beside the views (`frame.json`) so that `reproject` can return to
+/// the input's frame.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ViewsInfo {
+    pub frame: Frame,
+    pub up: UpAxis,
+    pub views: Vec<usize>,
+    pub size: usize,
+    pub points: usize,
+}
+
+/// The name of [`ViewsInfo`]'s file in a view directory.
+pub const INFO_FILE: &str = "frame.json";
+
+impl ViewsInfo {
+    pub fn write(&self, dir: &Path) -> Result<(), ViewError> {
+        let path = dir.join(INFO_FILE);
+        atomic_write(&path, |w| {
+            serde_json::to_writer_pretty(&mut *w, self).map_err(std::io::Error::other)
+        })
+        .map_err(|source| ViewError::Io { path, source })
+    }
+
+    /// The info of view directory `dir`; `None` when it has none.
+    pub fn read(dir: &Path) -> Result<Option<ViewsInfo>, ViewError> {
+        let path = dir.join(INFO_FILE);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => return Err(ViewError::Io { path, source }),
+        };
+        ViewsInfo::from_json(&bytes)
+            .map(Some)
+            .map_err(|problem| ViewError::Invalid { path, problem })
+    }
+
+    /// Parses a `frame.json`, refusing frames that cannot map points back (zero or non-finite
+    /// scale or offsets).
+    pub fn from_json(bytes: &[u8]) -> Result<ViewsInfo, String> {
+        let info: ViewsInfo = serde_json::from_slice(bytes)
+            .map_err(|e| format!("not a valid frame file: {e}"))?;
+        info.frame.check()?;
+        Ok(info)
+    }
 }
 
 pub fn locations_path(dir: &Path, camera: usize) -> PathBuf {
@@ -113,21 +161,36 @@ pub fn write_views(dir: &Path, images: &ViewImages) -> Result<(), ViewError> {
     Ok(())
 }
 
+/// The largest view side read: 16× the paper's 256², and a 16-bit RGB image of it decodes to
+/// 96 MiB, so a header claiming more is refused before anything is decoded.
+pub const MAX_VIEW_SIZE: u32 = 4096;
+
 fn open(path: &Path) -> Result<image::DynamicImage, ViewError> {
-    let reader = image::ImageReader::open(path).map_err(|source| ViewError::Io {
+    let io = |source| ViewError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    reader
+    };
+    let mut reader = image::ImageReader::open(path)
+        .map_err(io)?
         .with_guessed_format()
-        .map_err(|source| ViewError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
+        .map_err(io)?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_VIEW_SIZE);
+    limits.max_image_height = Some(MAX_VIEW_SIZE);
+    reader.limits(limits);
+    reader
         .decode()
-        .map_err(|e| ViewError::Decode {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+        .map_err(|e| match e {
+            image::ImageError::Limits(_) => ViewError::Invalid {
+                path: path.to_path_buf(),
+                problem: format!(
+                    "the image exceeds {MAX_VIEW_SIZE}×{MAX_VIEW_SIZE} px, the largest view read"
+                ),
+            },
+            e => ViewError::Decode {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            },
         })
 }
 

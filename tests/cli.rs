@@ -632,6 +632,42 @@ fn synth_is_deterministic_and_writes_a_preview() {
 }
 
 #[test]
+fn prepare_shards_share_one_folder_and_a_last_run_writes_the_manifest() {
+    let dir = TempDir::new().unwrap();
+    let meshes = dir.path().join("meshes");
+    mvpcc()
+        .args(["synth", "--count", "5", "--seed", "5", "-q", "--out"])
+        .arg(&meshes)
+        .assert()
+        .success();
+    let data = dir.path().join("data");
+    let prepare = |extra: &[&str]| -> serde_json::Value {
+        let out = mvpcc()
+            .args(["prepare", "--json", "--out"])
+            .arg(&data)
+            .arg("--meshes")
+            .arg(&meshes)
+            .args(SMALL)
+            .args(extra)
+            .assert()
+            .success()
+            .get_output()
+            .stdout
+            .clone();
+        serde_json::from_slice(&out).unwrap()
+    };
+    let first = prepare(&["--shard", "0/2"]);
+    let second = prepare(&["--shard", "1/2"]);
+    assert!(first["manifest"].is_null() && !data.join("manifest.json").exists());
+    assert_eq!(first["shard"], "0/2");
+    let made = first["models"].as_u64().unwrap() + second["models"].as_u64().unwrap();
+    assert_eq!(made, 5, "the shards together prepare each mesh once");
+    let last = prepare(&[]);
+    assert_eq!((&last["models"], &last["resumed"]), (&5.into(), &5.into()));
+    assert_eq!(read_json(&data.join("manifest.json"))["models"].as_array().unwrap().len(), 5);
+}
+
+#[test]
 fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings() {
     let dir = TempDir::new().unwrap();
     let data = dir.path().join("data");

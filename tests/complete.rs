@@ -256,8 +256,17 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .stderr(predicate::str::contains("broken.ply"))
         .stderr(predicate::str::contains("few.ply").and(predicate::str::contains("20 points")))
         .stderr(predicate::str::contains("panicked").not());
-    let reports: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
-    assert_eq!(reports.as_array().unwrap().len(), 4);
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    assert_eq!(report["results"].as_array().unwrap().len(), 4);
+    assert_eq!((&report["completed"], &report["failed"]), (&2.into(), &2.into()));
+    let failed: Vec<&str> = report["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["status"] == "failed")
+        .map(|r| r["input"].as_str().unwrap())
+        .collect();
+    assert!(failed.iter().any(|f| f.ends_with("broken.ply")), "{failed:?}");
     assert!(
         read_cloud(&outputs.join("a.ply"), None)
             .unwrap()
@@ -279,6 +288,79 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(leftovers.len(), 2, "no temp files left: {leftovers:?}");
+}
+
+/// `complete` over a folder with `--json`: the inputs of the files it completed and skipped.
+fn batch_run(args: &[&str]) -> (Vec<String>, Vec<String>) {
+    let assert = mvpcc()
+        .args(["complete", "--method", "mirror", "--json"])
+        .args(args)
+        .assert()
+        .success();
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    let inputs = |status: &str| -> Vec<String> {
+        report["results"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["status"] == status)
+            .map(|r| r["input"].as_str().unwrap().to_string())
+            .collect()
+    };
+    (inputs("completed"), inputs("skipped"))
+}
+
+#[test]
+fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
+    let dir = TempDir::new().unwrap();
+    let inputs = dir.path().join("in");
+    let outputs = dir.path().join("out");
+    std::fs::create_dir_all(inputs.join("block")).unwrap();
+    let names = ["a.ply", "b.ply", "c.ply", "block/d.ply", "block/e.ply", "block/f.ply"];
+    for (i, name) in names.iter().enumerate() {
+        let cloud = shapes::scanned_side(&shapes::car(3000, i as u64));
+        write_cloud(&inputs.join(name), &cloud, None, Encoding::Binary).unwrap();
+    }
+    let dirs = ["--input-dir", s(&inputs), "--output-dir", s(&outputs)];
+    let mut taken = Vec::new();
+    for shard in ["0/3", "1/3", "2/3"] {
+        let (completed, skipped) = batch_run(&[&dirs[..], &["--shard", shard]].concat());
+        assert!(skipped.is_empty());
+        taken.extend(completed);
+    }
+    taken.sort();
+    let mut all: Vec<String> = names.iter().map(|n| s(&inputs.join(n)).to_string()).collect();
+    all.sort();
+    assert_eq!(taken, all, "the shards together take each file once");
+
+    let (completed, skipped) = batch_run(&[&dirs[..], &["--skip-existing"]].concat());
+    assert!(completed.is_empty(), "{completed:?}");
+    assert_eq!(skipped.len(), names.len());
+    std::fs::remove_file(outputs.join("block/e.ply")).unwrap();
+    let (completed, _) = batch_run(&[&dirs[..], &["--skip-existing"]].concat());
+    assert_eq!(completed, [s(&inputs.join("block/e.ply"))]);
+
+    let list = dir.path().join("list.txt");
+    let listed = dir.path().join("listed");
+    let absolute = inputs.join("c.ply");
+    std::fs::write(&list, format!("# two of them\nblock/d.ply\n{}\n", s(&absolute))).unwrap();
+    let (completed, _) = batch_run(&[
+        "--list",
+        s(&list),
+        "--input-dir",
+        s(&inputs),
+        "--output-dir",
+        s(&listed),
+    ]);
+    assert_eq!(completed.len(), 2);
+    assert!(listed.join("block/d.ply").is_file() && listed.join("c.ply").is_file());
+
+    mvpcc()
+        .args(["complete", "--input-dir", s(&inputs), "--output-dir", s(&outputs)])
+        .args(["--shard", "3/3"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("counted from 0"));
 }
 
 #[test]
@@ -356,10 +438,11 @@ fn the_paper_pipeline_runs_on_the_reference_scans() {
         .args(["--up", "z", "--json"])
         .assert()
         .success();
-    let reports: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
-    let reports = reports.as_array().unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    let reports = report["results"].as_array().unwrap();
     assert_eq!(reports.len(), 4);
     for r in reports {
+        assert_eq!(r["status"], "completed", "{r}");
         assert_eq!(r["orientation"]["method"], "none", "{r}");
         assert!(r["symmetry_plane"].is_null() && r["mirrored"] == 0, "{r}");
         assert_eq!(

@@ -376,6 +376,94 @@ fn ctrl_c_saves_a_checkpoint_and_the_run_resumes_from_it() {
         )));
 }
 
+/// Starts `train` into `run` and kills it with SIGKILL as soon as `ready` holds (polled without
+/// pause, so a moment that lasts milliseconds is caught).
+#[cfg(unix)]
+fn kill_when(run: &Path, resume: bool, ready: impl Fn(&Path) -> bool) {
+    let mut cmd = base_std(run);
+    cmd.args(["--config", "tiny", "--batch", "1", "--val-every", "2"])
+        .args(["--val-samples", "2", "--log-every", "1", "--checkpoint-every", "1"])
+        .args(["--keep", "2", "--steps", "1000"])
+        .stderr(std::process::Stdio::null());
+    if resume {
+        cmd.arg("--resume");
+    }
+    let mut child = cmd.spawn().unwrap();
+    let started = std::time::Instant::now();
+    while !ready(run) {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        assert!(started.elapsed().as_secs() < 60, "the moment never came");
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+fn train_lines(run: &Path) -> usize {
+    std::fs::read_to_string(run.join("log.jsonl"))
+        .map(|t| t.matches("\"train\"").count())
+        .unwrap_or(0)
+}
+
+/// SIGKILL three times, at three kinds of moment (after a step's log line, while a checkpoint
+/// is being written, right as the log grows), then `--resume` runs to the end: every file is
+/// whole, and the log holds each step once.
+#[cfg(unix)]
+#[test]
+fn a_run_killed_three_times_resumes_and_finishes() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    kill_when(&run, false, |run| train_lines(run) >= 2);
+    let writing = |run: &Path| {
+        std::fs::read_dir(run.join("checkpoints")).is_ok_and(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .any(|e| e.file_name().to_string_lossy().starts_with(".tmp-"))
+        })
+    };
+    kill_when(&run, true, writing);
+    let before = train_lines(&run);
+    kill_when(&run, true, |run| train_lines(run) > before + 1);
+
+    let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
+    let step: u64 = latest.trim().trim_start_matches("step-").parse().unwrap();
+    assert!(step >= 2, "the kills came before any progress ({latest})");
+    let last = step + 3;
+    #[rustfmt::skip]
+    let same = [
+        "--batch", "1", "--val-every", "2", "--log-every", "1", "--checkpoint-every", "1",
+        "--keep", "2",
+    ];
+    train(&run, last, &same)
+        .arg("--resume")
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(format!("stopped at step {last}")));
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    let mut steps: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("whole lines"))
+        .filter(|r| r["kind"] == "train")
+        .map(|r| r["step"].as_u64().unwrap())
+        .collect();
+    let logged = steps.len();
+    steps.dedup();
+    assert_eq!(steps.len(), logged, "a step logged twice: {steps:?}");
+    assert!(steps.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+    assert_eq!(steps.last(), Some(&last));
+    let validated = validated_steps(&run);
+    assert!(validated.windows(2).all(|w| w[0] < w[1]), "{validated:?}");
+    let bytes = std::fs::read(run.join("generator.safetensors")).unwrap();
+    generator_from_bytes(&bytes, &Device::flex()).unwrap();
+    let best = std::fs::read(run.join("best/state.json")).unwrap();
+    serde_json::from_slice::<serde_json::Value>(&best).unwrap();
+    let leftovers: Vec<String> = std::fs::read_dir(run.join("checkpoints"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
 #[test]
 fn the_reference_bus_trains_without_a_validation_split() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/views");

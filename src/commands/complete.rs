@@ -1,6 +1,7 @@
 use super::project::default_up;
 use super::{load, progress, Log};
-use crate::clean::clean;
+use crate::batch::{self, read_list, walk};
+use crate::clean::{clean, CleanReport};
 use crate::cli::CompleteArgs;
 use crate::cloud::PointCloud;
 use crate::complete::{complete, Completion, Method, Options, DEFAULT_MODEL, SYNTHETIC};
@@ -14,11 +15,12 @@ use crate::preview::{render, Layer};
 use crate::views::write_views;
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
-use serde_json::{json, Value};
+use serde::Serialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The networks a run needs, loaded once for all its files.
 struct Models {
@@ -49,10 +51,8 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        (_, _, Some(input_dir), Some(output_dir)) => {
-            batch(input_dir, output_dir, &args, &models, log)
-        }
-        _ => bail!("give IN and OUT, or --input-dir and --output-dir"),
+        (None, None, _, Some(_)) => batch(&args, &models, log),
+        _ => bail!("give IN and OUT, or --input-dir (or --list) and --output-dir"),
     }
 }
 
@@ -159,11 +159,41 @@ fn output_format(args: &CompleteArgs, input: &Path, output: &Path) -> anyhow::Re
         .map_err(|e| anyhow!("{}: {e}", output.display()))
 }
 
-fn seconds(d: Duration) -> f64 {
-    d.as_secs_f64()
+/// What `complete --json` reports for one file.
+#[derive(Debug, Serialize)]
+struct FileReport {
+    input: PathBuf,
+    output: PathBuf,
+    method: Method,
+    input_points: usize,
+    output_points: usize,
+    added: usize,
+    mirrored: usize,
+    filtered_out: usize,
+    symmetry_plane: Option<PlaneReport>,
+    orientation: OrientationReport,
+    cleaned: Option<CleanReport>,
+    warnings: Vec<String>,
+    /// Seconds per stage, as `--timings` prints them.
+    seconds: BTreeMap<String, f64>,
 }
 
-/// Completes one file; the JSON report of what happened.
+/// The symmetry plane `x = x` in the normalized frame, and the share of points it mirrors onto
+/// others.
+#[derive(Debug, Serialize)]
+struct PlaneReport {
+    x: f64,
+    support: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct OrientationReport {
+    heading: Option<f64>,
+    method: &'static str,
+    refinement: Option<f64>,
+}
+
+/// Completes one file; the report of what happened.
 fn complete_file(
     input: &Path,
     output: &Path,
@@ -171,7 +201,7 @@ fn complete_file(
     args: &CompleteArgs,
     models: &Models,
     log: Log,
-) -> anyhow::Result<Value> {
+) -> anyhow::Result<FileReport> {
     let total = Instant::now();
     check_output(output, &[input])?;
     let format = output_format(args, input, output)?;
@@ -258,29 +288,32 @@ fn complete_file(
             eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
         }
     }
-    let timings: serde_json::Map<String, Value> = rows
+    let seconds = rows
         .iter()
-        .map(|(name, d)| (name.replace('-', ""), json!(seconds(*d))))
+        .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
         .collect();
-    Ok(json!({
-            "input": input,
-            "output": output,
-            "method": args.method,
-            "input_points": done.input_points,
-            "output_points": done.cloud.len(),
-            "added": done.added,
-            "mirrored": done.mirrored,
-            "filtered_out": done.filtered_out,
-            "symmetry_plane": done.plane.map(|p| json!({"x": p.offset, "support": p.support})),
-            "orientation": {
-                "heading": orientation.heading,
-                "method": orientation.method,
-                "refinement": orientation.refinement,
-            },
-            "cleaned": cleaned,
-            "warnings": done.warnings,
-            "seconds": timings,
-    }))
+    Ok(FileReport {
+        input: input.to_path_buf(),
+        output: output.to_path_buf(),
+        method: args.method,
+        input_points: done.input_points,
+        output_points: done.cloud.len(),
+        added: done.added,
+        mirrored: done.mirrored,
+        filtered_out: done.filtered_out,
+        symmetry_plane: done.plane.map(|p| PlaneReport {
+            x: p.offset,
+            support: p.support,
+        }),
+        orientation: OrientationReport {
+            heading: orientation.heading,
+            method: orientation.method,
+            refinement: orientation.refinement,
+        },
+        cleaned,
+        warnings: done.warnings,
+        seconds,
+    })
 }
 
 /// The network's views as `DIR/input/` and `DIR/output/`; said so when the method ran none.
@@ -344,74 +377,114 @@ fn matches(pattern: &[char], name: &[char]) -> bool {
     }
 }
 
-/// Cloud files under `dir`, sorted, as paths relative to it.
-fn cloud_files(dir: &Path, include: Option<&str>) -> anyhow::Result<Vec<PathBuf>> {
-    let pattern: Option<Vec<char>> = include.map(|p| p.chars().collect());
-    let mut found = Vec::new();
-    let mut pending = vec![dir.to_path_buf()];
-    // Links are followed, but every directory and file is taken once: a link back into the
-    // tree (or to its parent) would otherwise repeat it down to the path-length limit.
-    let mut seen = std::collections::HashSet::new();
-    while let Some(d) = pending.pop() {
-        if !seen.insert(d.canonicalize().unwrap_or_else(|_| d.clone())) {
-            continue;
-        }
-        let entries =
-            std::fs::read_dir(&d).with_context(|| format!("{}: cannot list", d.display()))?;
-        for entry in entries {
-            let path = entry.with_context(|| d.display().to_string())?.path();
-            if path.is_dir() {
-                pending.push(path);
-                continue;
-            }
-            if !seen.insert(path.canonicalize().unwrap_or_else(|_| path.clone())) {
-                continue;
-            }
-            let name: Vec<char> = path
-                .file_name()
-                .and_then(|n| n.to_str())
-                .unwrap_or_default()
-                .chars()
-                .collect();
-            let wanted = match &pattern {
-                Some(p) => matches(p, &name),
-                None => Format::from_path(&path).is_ok(),
-            };
-            if wanted {
-                let relative = path
-                    .strip_prefix(dir)
-                    .expect("found under dir")
-                    .to_path_buf();
-                found.push(relative);
-            }
-        }
-    }
-    found.sort();
-    Ok(found)
+/// What `complete --json` reports for a batch.
+#[derive(Debug, Serialize)]
+struct BatchReport {
+    /// `i/n` when the run took one shard of the files.
+    shard: Option<String>,
+    /// Files this run took (its shard's, when sharded).
+    files: usize,
+    completed: usize,
+    skipped: usize,
+    failed: usize,
+    results: Vec<BatchEntry>,
 }
 
-fn batch(
-    input_dir: &Path,
+#[derive(Debug, Serialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
+enum BatchEntry {
+    Completed(FileReport),
+    /// `--skip-existing` found the output.
+    Skipped { input: PathBuf, output: PathBuf },
+    Failed { input: PathBuf, error: String },
+}
+
+/// The batch's inputs relative to its root, this shard's only: the list's, or the cloud files
+/// (or those `--include` matches) under the root.
+fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>> {
+    let files = match &args.list {
+        Some(list) => read_list(list, root)?,
+        None => {
+            if !root.is_dir() {
+                bail!("{}: not a directory", root.display());
+            }
+            let pattern: Option<Vec<char>> = args.include.as_ref().map(|p| p.chars().collect());
+            let files = walk(root, |path| match &pattern {
+                Some(p) => {
+                    let name = path.file_name().unwrap_or_default().to_string_lossy();
+                    matches(p, &name.chars().collect::<Vec<_>>())
+                }
+                None => Format::from_path(path).is_ok(),
+            })?;
+            if files.is_empty() {
+                bail!("{}: no point cloud files", root.display());
+            }
+            files
+        }
+    };
+    Ok(match args.shard {
+        Some(shard) => files
+            .into_iter()
+            .filter(|f| shard.owns(&batch::key(f)))
+            .collect(),
+        None => files,
+    })
+}
+
+/// Where the output of `relative` goes.
+fn batch_output(output_dir: &Path, relative: &Path, args: &CompleteArgs) -> PathBuf {
+    let mut output = output_dir.join(relative);
+    if let Some(format) = args.output_options.out_format {
+        output.set_extension(extension(format));
+    }
+    output
+}
+
+/// Completes, skips or fails one file of a batch.
+fn batch_entry(
+    root: &Path,
+    relative: &Path,
     output_dir: &Path,
     args: &CompleteArgs,
     models: &Models,
-    log: Log,
-) -> anyhow::Result<()> {
-    if !input_dir.is_dir() {
-        bail!("{}: not a directory", input_dir.display());
+) -> BatchEntry {
+    let input = root.join(relative);
+    let output = batch_output(output_dir, relative, args);
+    if args.skip_existing && output.exists() {
+        return BatchEntry::Skipped { input, output };
     }
-    let files = cloud_files(input_dir, args.include.as_deref())?;
-    if files.is_empty() {
-        bail!("{}: no point cloud files", input_dir.display());
+    // Each file's own messages would tear the progress bar; the batch summarizes them.
+    let quiet = Log { quiet: true };
+    let result = output
+        .parent()
+        .map_or(Ok(()), std::fs::create_dir_all)
+        .with_context(|| format!("{}: cannot create", output.display()))
+        .and_then(|()| {
+            let views = args
+                .save_views
+                .as_ref()
+                .map(|d| d.join(relative.with_extension("")));
+            complete_file(&input, &output, views, args, models, quiet)
+        });
+    match result {
+        Ok(report) => BatchEntry::Completed(report),
+        Err(e) => BatchEntry::Failed {
+            input,
+            error: format!("{e:#}").replace('\n', " "),
+        },
     }
+}
+
+fn batch(args: &CompleteArgs, models: &Models, log: Log) -> anyhow::Result<()> {
+    let output_dir = args.output_dir.as_deref().expect("clap requires it");
+    let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
+    let files = batch_files(&root, args)?;
     std::fs::create_dir_all(output_dir)
         .with_context(|| format!("{}: cannot create", output_dir.display()))?;
     let bar = progress(files.len(), "completing", log);
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, anyhow::Result<Value>)>> = Mutex::new(Vec::new());
-    // Each file's own messages would tear the bar; they are summarized at the end instead.
-    let quiet_file = Log { quiet: true };
-    let jobs = args.jobs.clamp(1, files.len());
+    let results: Mutex<Vec<(usize, BatchEntry)>> = Mutex::new(Vec::new());
+    let jobs = args.jobs.clamp(1, files.len().max(1));
     std::thread::scope(|scope| {
         for _ in 0..jobs {
             scope.spawn(|| loop {
@@ -419,23 +492,8 @@ fn batch(
                 let Some(relative) = files.get(i) else {
                     break;
                 };
-                let input = input_dir.join(relative);
-                let mut output = output_dir.join(relative);
-                if let Some(format) = args.output_options.out_format {
-                    output.set_extension(extension(format));
-                }
-                let result = output
-                    .parent()
-                    .map_or(Ok(()), std::fs::create_dir_all)
-                    .with_context(|| format!("{}: cannot create", output.display()))
-                    .and_then(|()| {
-                        let views = args
-                            .save_views
-                            .as_ref()
-                            .map(|d| d.join(relative.with_extension("")));
-                        complete_file(&input, &output, views, args, models, quiet_file)
-                    });
-                results.lock().expect("no worker panics").push((i, result));
+                let entry = batch_entry(&root, relative, output_dir, args, models);
+                results.lock().expect("no worker panics").push((i, entry));
                 bar.inc(1);
             });
         }
@@ -443,42 +501,55 @@ fn batch(
     bar.finish_and_clear();
     let mut results = results.into_inner().expect("no worker panics");
     results.sort_by_key(|(i, _)| *i);
-    let mut failed = Vec::new();
-    let mut reports = Vec::new();
-    for (i, result) in results {
-        match result {
-            Ok(report) => {
-                for w in report["warnings"].as_array().into_iter().flatten() {
-                    log.warn(format!(
-                        "{}: {}",
-                        input_dir.join(&files[i]).display(),
-                        w.as_str().unwrap_or_default()
-                    ));
+    let results: Vec<BatchEntry> = results.into_iter().map(|(_, e)| e).collect();
+    let report = summarize(args, results, log);
+    log.info(format!(
+        "{} of {} files completed into {}{}, {} skipped, {} failed",
+        report.completed,
+        report.files,
+        output_dir.display(),
+        report
+            .shard
+            .as_ref()
+            .map_or(String::new(), |s| format!(" (shard {s})")),
+        report.skipped,
+        report.failed
+    ));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    if report.failed > 0 {
+        bail!("{} of {} files failed", report.failed, report.files);
+    }
+    Ok(())
+}
+
+/// Counts the outcomes and says what went wrong with each file on stderr.
+fn summarize(args: &CompleteArgs, results: Vec<BatchEntry>, log: Log) -> BatchReport {
+    let (mut completed, mut skipped, mut failed) = (0, 0, 0);
+    for entry in &results {
+        match entry {
+            BatchEntry::Completed(report) => {
+                completed += 1;
+                for w in &report.warnings {
+                    log.warn(format!("{}: {w}", report.input.display()));
                 }
-                reports.push(report);
             }
-            Err(e) => {
-                let message = format!("{e:#}").replace('\n', " ");
-                eprintln!("failed: {message}");
-                reports.push(json!({"input": input_dir.join(&files[i]), "error": message}));
-                failed.push(message);
+            BatchEntry::Skipped { .. } => skipped += 1,
+            BatchEntry::Failed { error, .. } => {
+                failed += 1;
+                eprintln!("failed: {error}");
             }
         }
     }
-    let done = files.len() - failed.len();
-    log.info(format!(
-        "{done} of {} files completed into {}, {} failed",
-        files.len(),
-        output_dir.display(),
-        failed.len()
-    ));
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&reports)?);
+    BatchReport {
+        shard: args.shard.map(|s| s.to_string()),
+        files: results.len(),
+        completed,
+        skipped,
+        failed,
+        results,
     }
-    if !failed.is_empty() {
-        bail!("{} of {} files failed", failed.len(), files.len());
-    }
-    Ok(())
 }
 
 fn extension(format: Format) -> &'static str {

@@ -25,7 +25,31 @@ struct Summary {
     skipped: usize,
     seconds: f64,
     models_per_second: f64,
-    manifest: String,
+    /// `i/n` when the run prepared one shard of the meshes.
+    shard: Option<String>,
+    /// The manifest written, by a run without `--shard`.
+    manifest: Option<String>,
+}
+
+/// Writes the dataset's manifest; its path.
+fn write_manifest(
+    out: &Path,
+    params: PrepareParams,
+    models: Vec<ModelEntry>,
+    skipped: Vec<Skipped>,
+) -> anyhow::Result<String> {
+    let manifest = Manifest {
+        mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
+        params,
+        models,
+        skipped,
+    };
+    let path = out.join(MANIFEST_FILE);
+    atomic_write(&path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &manifest).map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(path.display().to_string())
 }
 
 fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
@@ -146,13 +170,17 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     claim(out, &params)?;
-    let (sources, mut skipped) =
-        discover(&meshes).with_context(|| format!("{}: cannot list", meshes.display()))?;
+    let (mut sources, mut skipped) = discover(&meshes)?;
     if sources.is_empty() {
         bail!(
             "{}: no meshes found (.obj, .ply, .gltf, .glb)",
             meshes.display()
         );
+    }
+    if let Some(shard) = args.shard {
+        sources.retain(|s| shard.owns(&format!("{}/{}", s.category, s.name)));
+        // The run without --shard that writes the manifest lists them.
+        skipped.clear();
     }
     let layout = Layout { root: out.clone() };
     let mut done: Vec<ModelEntry> = Vec::new();
@@ -211,35 +239,27 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     done.sort_by(|a, b| (&a.category, &a.name).cmp(&(&b.category, &b.name)));
     skipped.extend(failed.into_inner().expect("not poisoned"));
     skipped.sort_by(|a, b| a.path.cmp(&b.path));
-    let manifest = Manifest {
-        mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
-        params,
-        models: done,
-        skipped,
-    };
-    let manifest_path = out.join(MANIFEST_FILE);
-    atomic_write(&manifest_path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &manifest).map_err(std::io::Error::other)
-    })
-    .with_context(|| format!("{}: cannot write", manifest_path.display()))?;
-    let count = |split: &str| manifest.models.iter().filter(|m| m.split == split).count();
     let summary = Summary {
-        models: manifest.models.len(),
+        models: done.len(),
         resumed,
-        train: count(TRAIN),
-        test: count(TEST),
-        samples: manifest.models.iter().map(|m| m.samples.len()).sum(),
-        skipped: manifest.skipped.len(),
+        train: done.iter().filter(|m| m.split == TRAIN).count(),
+        test: done.iter().filter(|m| m.split == TEST).count(),
+        samples: done.iter().map(|m| m.samples.len()).sum(),
+        skipped: skipped.len(),
         seconds,
         models_per_second: if seconds > 0.0 {
             new as f64 / seconds
         } else {
             0.0
         },
-        manifest: manifest_path.display().to_string(),
+        shard: args.shard.map(|s| s.to_string()),
+        manifest: match args.shard {
+            Some(_) => None,
+            None => Some(write_manifest(out, params, done, skipped)?),
+        },
     };
     log.info(format!(
-        "prepared {} models ({} train, {} test; {} new at {:.2}/s, {} resumed), {} samples; {} skipped — see {}",
+        "prepared {} models ({} train, {} test; {} new at {:.2}/s, {} resumed), {} samples; {}",
         summary.models,
         summary.train,
         summary.test,
@@ -247,13 +267,19 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
         summary.models_per_second,
         resumed,
         summary.samples,
-        summary.skipped,
-        summary.manifest
+        match (&summary.manifest, &summary.shard) {
+            (Some(path), _) => format!("{} skipped — see {path}", summary.skipped),
+            (None, Some(shard)) => format!(
+                "shard {shard}: once every shard is done, run the same command without --shard \
+                 to write the manifest"
+            ),
+            (None, None) => unreachable!("a run without --shard writes the manifest"),
+        }
     ));
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     }
-    if summary.models == 0 {
+    if summary.models == 0 && args.shard.is_none() {
         bail!("{}: none of the meshes could be used", meshes.display());
     }
     Ok(())

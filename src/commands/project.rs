@@ -2,24 +2,11 @@ use super::{load, Log};
 use crate::camera::Camera;
 use crate::cli::ProjectArgs;
 use crate::frame::{Frame, UpAxis};
-use crate::io::{atomic_write, Format};
+use crate::io::Format;
 use crate::projection::project;
-use crate::views::write_views;
+use crate::views::{write_views, ViewsInfo};
 use anyhow::{bail, Context};
-use serde::{Deserialize, Serialize};
 use std::path::Path;
-
-/// What `project` records beside the views so `reproject` can return to the input's frame.
-#[derive(Debug, Serialize, Deserialize)]
-pub(super) struct ViewsInfo {
-    pub frame: Frame,
-    pub up: UpAxis,
-    pub views: Vec<usize>,
-    pub size: usize,
-    pub points: usize,
-}
-
-pub(super) const INFO_FILE: &str = "frame.json";
 
 /// MLS formats are z-up; the dataset's own formats are y-up.
 pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
@@ -58,11 +45,7 @@ pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
         size: args.size,
         points: cloud.len(),
     };
-    let info_path = outdir.join(INFO_FILE);
-    atomic_write(&info_path, |w| {
-        serde_json::to_writer_pretty(&mut *w, &info).map_err(std::io::Error::other)
-    })
-    .with_context(|| info_path.display().to_string())?;
+    info.write(outdir)?;
     log.info(format!(
         "{}: {} points → {} views of {}×{} px, {} pixels occupied",
         outdir.display(),

@@ -1,11 +1,10 @@
-use super::project::{ViewsInfo, INFO_FILE};
 use super::Log;
 use crate::cli::ReprojectArgs;
 use crate::filter::inliers;
 use crate::io::{check_output, write_cloud};
 use crate::reprojection::{reproject, ReprojectOptions};
-use crate::views::{find_views, locations_path, read_views};
-use anyhow::{bail, Context};
+use crate::views::{find_views, locations_path, read_views, ViewsInfo};
+use anyhow::bail;
 
 pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = match &args.views {
@@ -36,15 +35,14 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
         );
     }
     let filtered = merged.filter(&inliers(&merged.positions, args.sor.params()));
-    let info_path = args.viewdir.join(INFO_FILE);
-    let output = if !args.normalized && info_path.exists() {
-        let text =
-            std::fs::read_to_string(&info_path).with_context(|| info_path.display().to_string())?;
-        let info: ViewsInfo = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a valid frame file", info_path.display()))?;
-        info.frame.denormalize(&filtered)
+    let info = if args.normalized {
+        None
     } else {
-        filtered
+        ViewsInfo::read(&args.viewdir)?
+    };
+    let output = match info {
+        Some(info) => info.frame.denormalize(&filtered),
+        None => filtered,
     };
     write_cloud(
         &args.output,

@@ -6,6 +6,7 @@ mod prepare;
 
 pub use prepare::{finished, prepare_model, PrepareError};
 
+use crate::batch::{walk, BatchError};
 use crate::mesh::{MeshStats, MESH_EXTENSIONS};
 use crate::scan::{PartialParams, PartialSpec};
 use crate::shapes::derive_seed;
@@ -73,10 +74,15 @@ const GENERIC_STEMS: [&str; 3] = ["model", "model_normalized", "mesh"];
 /// them: `DIR/<category>/<name>.obj`, ShapeNet's `DIR/<synset>/<id>/models/model_normalized.obj`
 /// (or, given a synset folder, `DIR/<id>/models/…` with DIR's name as the category). Two files
 /// that would get the same category and name keep the first.
-pub fn discover(dir: &Path) -> std::io::Result<(Vec<Source>, Vec<Skipped>)> {
-    let mut files = Vec::new();
-    walk(dir, &mut files)?;
-    files.sort();
+pub fn discover(dir: &Path) -> Result<(Vec<Source>, Vec<Skipped>), BatchError> {
+    let files: Vec<PathBuf> = walk(dir, |path| {
+        path.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| MESH_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    })?
+    .into_iter()
+    .map(|relative| dir.join(relative))
+    .collect();
     let root_name = dir
         .canonicalize()
         .ok()
@@ -133,27 +139,6 @@ pub fn discover(dir: &Path) -> std::io::Result<(Vec<Source>, Vec<Skipped>)> {
         });
     }
     Ok((sources, skipped))
-}
-
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
-    for entry in std::fs::read_dir(dir)? {
-        let entry = entry?;
-        let path = entry.path();
-        if entry.file_name().to_string_lossy().starts_with('.') {
-            continue;
-        }
-        // Follows symbolic links, so a folder of linked datasets is walked too.
-        if path.is_dir() {
-            walk(&path, out)?;
-        } else if path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| MESH_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        {
-            out.push(path);
-        }
-    }
-    Ok(())
 }
 
 /// The split of a model: a hash of its category and name, so it does not depend on the seed,

@@ -2,7 +2,7 @@
 //! writing back), RGB (16-bit scaled to 8), intensity, classification and the synthetic flag
 //! (the [`SYNTHETIC`] attribute).
 
-use super::Problem;
+use super::{check_points, Problem};
 use crate::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Writer};
@@ -27,6 +27,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
     let header = reader.header().clone();
     let declared = header.number_of_points() as usize;
+    check_points(declared)?;
     let t = header.transforms();
     let quantization = Quantization {
         scale: [t.x.scale, t.y.scale, t.z.scale],

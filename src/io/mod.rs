@@ -68,6 +68,12 @@ pub enum Problem {
     UnsupportedExtension(String),
     #[error("header declares {declared} points but the file holds only {found}")]
     Truncated { declared: usize, found: usize },
+    #[error(
+        "has {points} points or more, above the {limit} one input may have (about {} GiB in \
+         memory); split it into tiles, or raise {MAX_POINTS_VAR}",
+        limit.saturating_mul(BYTES_PER_POINT) >> 30
+    )]
+    TooManyPoints { points: usize, limit: usize },
     #[error("{0}")]
     Malformed(String),
     #[error("output would overwrite the input file")]
@@ -78,6 +84,31 @@ pub enum Problem {
     Write(std::io::Error),
     #[error("{0}")]
     Io(#[from] std::io::Error),
+}
+
+/// The environment variable that raises (or lowers) [`max_points`].
+pub const MAX_POINTS_VAR: &str = "MVPCC_MAX_POINTS";
+const DEFAULT_MAX_POINTS: usize = 200_000_000;
+/// Memory a read point takes with colour and the LAS attributes (f64 each).
+const BYTES_PER_POINT: usize = 72;
+
+/// The most points one input may have: 200 million (about 13 GiB once read) unless
+/// `MVPCC_MAX_POINTS` says otherwise. Readers check a header's count against it before reading
+/// the points, and text formats as they go, so an input over it is an error, not an abort.
+pub fn max_points() -> usize {
+    std::env::var(MAX_POINTS_VAR)
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(DEFAULT_MAX_POINTS)
+}
+
+/// Refuses a cloud of `points` points when it exceeds [`max_points`].
+pub(crate) fn check_points(points: usize) -> Result<(), Problem> {
+    let limit = max_points();
+    if points > limit {
+        return Err(Problem::TooManyPoints { points, limit });
+    }
+    Ok(())
 }
 
 /// A write error without the temporary file's name, which means nothing to the user.

@@ -1,7 +1,7 @@
 //! PCD v0.7 (ascii, binary, binary_compressed). Packed colour (`rgb`/`rgba`, F or U) holds the
 //! bits 0x00RRGGBB: the bits are reinterpreted, never the float value converted.
 
-use super::{fits_f32, Encoding, Problem};
+use super::{check_points, fits_f32, Encoding, Problem};
 use crate::cloud::{Attribute, PointCloud, ScalarKind};
 use std::io::Write;
 use std::path::Path;
@@ -187,6 +187,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
                     (None, Some(w), Some(h)) => w.saturating_mul(h),
                     _ => return Err(malformed("header has neither POINTS nor WIDTH and HEIGHT")),
                 };
+                check_points(points)?;
                 return Ok(Header {
                     fields,
                     points,

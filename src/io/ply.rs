@@ -1,6 +1,6 @@
 //! PLY (ascii, binary little and big endian) through ply-rs-bw; bodies are written directly.
 
-use super::{fits_f32, Encoding, Problem};
+use super::{check_points, fits_f32, Encoding, Problem};
 use crate::cloud::{Attribute, PointCloud, ScalarKind};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
@@ -157,6 +157,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
             "no 'vertex' element in the header".into(),
         ));
     };
+    check_points(vertex_def.count)?;
     let names: Vec<&String> = vertex_def.properties.keys().collect();
     for axis in ["x", "y", "z"] {
         if !names.iter().any(|n| n.as_str() == axis) {

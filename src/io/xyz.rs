@@ -1,7 +1,7 @@
 //! XYZ text: `x y z [r g b]` per line, separated by whitespace or commas; `#` comments and a
 //! non-numeric header line are skipped.
 
-use super::Problem;
+use super::{max_points, Problem};
 use crate::cloud::PointCloud;
 use std::io::Write;
 use std::path::Path;
@@ -11,6 +11,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         std::io::ErrorKind::InvalidData => Problem::Malformed("file is not text".into()),
         _ => Problem::Io(e),
     })?;
+    let limit = max_points();
     let mut positions = Vec::new();
     let mut colors: Vec<[f64; 3]> = Vec::new();
     let mut columns = None;
@@ -46,6 +47,12 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
                 "line {}: {tok:?} is not a number",
                 line_no + 1
             )));
+        }
+        if positions.len() >= limit {
+            return Err(Problem::TooManyPoints {
+                points: positions.len() + 1,
+                limit,
+            });
         }
         let n = values.len();
         if n != 3 && n < 6 {

@@ -122,7 +122,24 @@ pub enum ConfigError {
     DiscWidth(usize),
     #[error("views {0} must be at least 1")]
     Views(usize),
+    #[error("{field} {value} is above the largest this build accepts ({limit})")]
+    TooLarge {
+        field: &'static str,
+        value: usize,
+        limit: usize,
+    },
 }
+
+/// The largest shapes a config may declare. They lie far beyond any useful network (the paper's
+/// is w 64, r 8, S 256, V 4) and keep a corrupt or hostile weights file from making the loader
+/// build millions of layers before its tensors are looked at.
+const LIMITS: [(&str, usize); 5] = [
+    ("width", 1024),
+    ("discriminator width", 1024),
+    ("residual blocks", 64),
+    ("image size", crate::views::MAX_VIEW_SIZE as usize),
+    ("views", crate::camera::RIG_SIZE),
+];
 
 impl ModelConfig {
     /// Sizes the layers cannot work with: the two stride-2 stages and the discriminator's
@@ -139,6 +156,22 @@ impl ModelConfig {
         }
         if self.views == 0 {
             return Err(ConfigError::Views(self.views));
+        }
+        let values = [
+            self.width,
+            self.disc_width,
+            self.res_blocks,
+            self.size,
+            self.views,
+        ];
+        for ((field, limit), value) in LIMITS.into_iter().zip(values) {
+            if value > limit {
+                return Err(ConfigError::TooLarge {
+                    field,
+                    value,
+                    limit,
+                });
+            }
         }
         Ok(())
     }

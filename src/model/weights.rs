@@ -134,28 +134,39 @@ pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
 }
 
 pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
-    let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()));
+    // Partial and unvalidated, so that what does not fit comes back as data to word in one
+    // line instead of Burn's multi-line report.
+    let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()))
+        .allow_partial(true)
+        .validate(false);
     let result = module
         .load_from(&mut store)
-        .map_err(|e| WeightsError::Tensors(one_line(&e.to_string())))?;
+        .map_err(|e| WeightsError::Tensors(e.to_string().replace('\n', " ")))?;
+    let problem = |count: usize, what: &str, example: String| {
+        WeightsError::Tensors(format!("{count} {what}, e.g. {example}"))
+    };
+    if let Some(e) = result.errors.first() {
+        return Err(problem(
+            result.errors.len(),
+            "tensors do not fit the network",
+            e.to_string(),
+        ));
+    }
+    if let Some((path, _)) = result.missing.first() {
+        return Err(problem(
+            result.missing.len(),
+            "tensors the network needs are missing",
+            path.clone(),
+        ));
+    }
     if let Some(unused) = result.unused.first() {
-        return Err(WeightsError::Tensors(format!(
-            "{} tensors the network does not have, e.g. {unused}",
-            result.unused.len()
-        )));
+        return Err(problem(
+            result.unused.len(),
+            "tensors the network does not have",
+            unused.clone(),
+        ));
     }
     Ok(())
-}
-
-/// Burn's store errors run over several lines with hints; an error message here is one line.
-fn one_line(message: &str) -> String {
-    message
-        .split('\n')
-        .map(str::trim)
-        .filter(|l| !l.is_empty())
-        .take(3)
-        .collect::<Vec<_>>()
-        .join("; ")
 }
 
 pub fn generator_to_bytes(

@@ -26,6 +26,28 @@ pub struct OrienterConfig {
     pub points: usize,
 }
 
+impl OrienterConfig {
+    /// Refuses shapes no orientation network needs (layers over 4096 wide, more than 16 of
+    /// them, over 2¹⁶ points), which a damaged weights file could otherwise make the loader
+    /// build before its tensors are looked at.
+    pub fn validate(&self) -> Result<(), String> {
+        let widths = self.point_widths.iter().chain([&self.hidden]);
+        if self.point_widths.is_empty() || self.point_widths.len() > 16 {
+            return Err(format!(
+                "{} point layers (1 to 16 expected)",
+                self.point_widths.len()
+            ));
+        }
+        if let Some(w) = widths.into_iter().find(|&&w| w == 0 || w > 4096) {
+            return Err(format!("a layer {w} wide (1 to 4096 expected)"));
+        }
+        if self.points == 0 || self.points > 1 << 16 {
+            return Err(format!("{} points (1 to 65536 expected)", self.points));
+        }
+        Ok(())
+    }
+}
+
 #[derive(Module, Debug)]
 pub struct OrienterNet {
     point: Vec<Linear>,
@@ -123,6 +145,7 @@ impl Orienter {
 
     pub fn from_bytes(bytes: &[u8], device: Device) -> Result<Orienter, WeightsError> {
         let config: OrienterConfig = read_declared(bytes, Network::Orienter)?;
+        config.validate().map_err(WeightsError::Config)?;
         let mut net = OrienterNet::new(&config, &device);
         apply(&mut net, bytes)?;
         Ok(Orienter::new(net, config, device))

@@ -19,6 +19,7 @@ use thiserror::Error;
 
 pub const CHECKPOINTS: &str = "checkpoints";
 const LATEST: &str = "latest";
+const BEST: &str = "best";
 const STATE: &str = "state.json";
 const GENERATOR: &str = "generator.bpk";
 const DISCRIMINATOR: &str = "discriminator.bpk";
@@ -115,12 +116,10 @@ pub fn save(
 ) -> Result<PathBuf, CheckpointError> {
     let root = run.join(CHECKPOINTS);
     std::fs::create_dir_all(&root).map_err(io_error(&root))?;
+    remove_leftovers(&root)?;
     let name = format!("step-{:08}", state.step);
     let dir = root.join(&name);
     let tmp = root.join(format!(".tmp-{name}"));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(io_error(&tmp))?;
-    }
     std::fs::create_dir_all(&tmp).map_err(io_error(&tmp))?;
     let [g_optim, d_optim] = gan.optimizer_bytes().map_err(|e| invalid(&tmp, e))?;
     write(&tmp.join(GENERATOR), &module_bytes(&gan.generator, &tmp)?)?;
@@ -137,14 +136,61 @@ pub fn save(
     write(&tmp.join(DISCRIMINATOR_WEIGHTS), &weights)?;
     let json = serde_json::to_vec_pretty(state).map_err(|e| invalid(&tmp, e))?;
     write(&tmp.join(STATE), &json)?;
-    if dir.exists() {
-        std::fs::remove_dir_all(&dir).map_err(io_error(&dir))?;
-    }
-    std::fs::rename(&tmp, &dir).map_err(io_error(&dir))?;
+    replace_dir(&tmp, &dir)?;
     let latest = root.join(LATEST);
     atomic_write(&latest, |w| w.write_all(name.as_bytes())).map_err(io_error(&latest))?;
     prune(run, keep.max(1))?;
     Ok(dir)
+}
+
+/// Puts folder `tmp` in the place of `dir`. An existing `dir` is first renamed aside, so a
+/// process killed in between leaves either folder whole, never a half-deleted one under the
+/// name a resume would read.
+fn replace_dir(tmp: &Path, dir: &Path) -> Result<(), CheckpointError> {
+    let name = dir.file_name().expect("a named folder").to_string_lossy();
+    let old = dir.with_file_name(format!(".old-{name}"));
+    if dir.exists() {
+        std::fs::rename(dir, &old).map_err(io_error(dir))?;
+    }
+    std::fs::rename(tmp, dir).map_err(io_error(dir))?;
+    discard(&old)
+}
+
+/// Removes folder `dir` if it exists, renaming it to a hidden name first so that a removal
+/// cut short leaves nothing a resume would take for a checkpoint.
+fn discard(dir: &Path) -> Result<(), CheckpointError> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    let name = dir.file_name().expect("a named folder").to_string_lossy();
+    let hidden = if name.starts_with('.') {
+        dir.to_path_buf()
+    } else {
+        dir.with_file_name(format!(".old-{name}"))
+    };
+    if hidden != dir {
+        std::fs::rename(dir, &hidden).map_err(io_error(dir))?;
+    }
+    std::fs::remove_dir_all(&hidden).map_err(io_error(&hidden))
+}
+
+/// What a killed save or prune left behind (`.tmp-*`, `.old-*`).
+fn remove_leftovers(root: &Path) -> Result<(), CheckpointError> {
+    for entry in std::fs::read_dir(root).map_err(io_error(root))? {
+        let path = entry.map_err(io_error(root))?.path();
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        if path.is_dir() && (name.starts_with(".tmp-") || name.starts_with(".old-")) {
+            std::fs::remove_dir_all(&path).map_err(io_error(&path))?;
+        }
+    }
+    Ok(())
+}
+
+/// Whether checkpoint folder `dir` holds every file a resume reads.
+fn is_whole(dir: &Path) -> bool {
+    [STATE, GENERATOR, DISCRIMINATOR, GENERATOR_OPTIM, DISCRIMINATOR_OPTIM]
+        .iter()
+        .all(|f| dir.join(f).is_file())
 }
 
 /// Checkpoint folders, oldest first.
@@ -170,28 +216,30 @@ pub fn list(run: &Path) -> Result<Vec<PathBuf>, CheckpointError> {
 fn prune(run: &Path, keep: usize) -> Result<(), CheckpointError> {
     let dirs = list(run)?;
     for old in dirs.iter().take(dirs.len().saturating_sub(keep)) {
-        std::fs::remove_dir_all(old).map_err(io_error(old))?;
+        discard(old)?;
     }
     Ok(())
 }
 
-/// The checkpoint `checkpoints/latest` names, if the run has one.
+/// The checkpoint a resume starts from: the one `checkpoints/latest` names, or, should a kill
+/// have caught that one being replaced, the newest whole one; `None` before the first.
 pub fn latest(run: &Path) -> Result<Option<PathBuf>, CheckpointError> {
     let path = run.join(CHECKPOINTS).join(LATEST);
-    match std::fs::read_to_string(&path) {
-        Ok(name) => {
-            let dir = run.join(CHECKPOINTS).join(name.trim());
-            if dir.join(STATE).is_file() {
-                Ok(Some(dir))
-            } else {
-                Err(invalid(
-                    &path,
-                    format!("names {}, which is missing", name.trim()),
-                ))
-            }
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-        Err(source) => Err(CheckpointError::Io { path, source }),
+    let named = match std::fs::read_to_string(&path) {
+        Ok(name) => name.trim().to_string(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(CheckpointError::Io { path, source }),
+    };
+    let dir = run.join(CHECKPOINTS).join(&named);
+    if is_whole(&dir) {
+        return Ok(Some(dir));
+    }
+    match list(run)?.into_iter().rev().find(|d| is_whole(d)) {
+        Some(dir) => Ok(Some(dir)),
+        None => Err(invalid(
+            &path,
+            format!("names {named}, which is missing, and no other checkpoint is whole"),
+        )),
     }
 }
 
@@ -238,11 +286,9 @@ pub fn load(
 
 /// Copies checkpoint `dir` to `run/best` (replacing the previous best in one rename).
 pub fn keep_as_best(run: &Path, dir: &Path) -> Result<PathBuf, CheckpointError> {
-    let best = run.join("best");
+    let best = run.join(BEST);
     let tmp = run.join(".tmp-best");
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(io_error(&tmp))?;
-    }
+    discard(&tmp)?;
     std::fs::create_dir_all(&tmp).map_err(io_error(&tmp))?;
     for entry in std::fs::read_dir(dir).map_err(io_error(dir))? {
         let from = entry.map_err(io_error(dir))?.path();
@@ -250,9 +296,92 @@ pub fn keep_as_best(run: &Path, dir: &Path) -> Result<PathBuf, CheckpointError> 
             std::fs::copy(&from, tmp.join(name)).map_err(io_error(&from))?;
         }
     }
-    if best.exists() {
-        std::fs::remove_dir_all(&best).map_err(io_error(&best))?;
-    }
-    std::fs::rename(&tmp, &best).map_err(io_error(&best))?;
+    replace_dir(&tmp, &best)?;
     Ok(best)
+}
+
+/// The step of the checkpoint copied to `run/best`, if it is there whole.
+fn best_step(run: &Path) -> Option<u64> {
+    let best = run.join(BEST);
+    if !is_whole(&best) {
+        return None;
+    }
+    let state: TrainState = serde_json::from_slice(&std::fs::read(best.join(STATE)).ok()?).ok()?;
+    Some(state.step)
+}
+
+/// Makes `run/best` the checkpoint of `state.best_step` again where a kill between saving that
+/// checkpoint and copying it left an older best (or none); a no-op otherwise.
+pub fn restore_best(run: &Path, state: &TrainState) -> Result<(), CheckpointError> {
+    let Some(step) = state.best_step else {
+        return Ok(());
+    };
+    let dir = run.join(CHECKPOINTS).join(format!("step-{step:08}"));
+    if best_step(run) != Some(step) && is_whole(&dir) {
+        keep_as_best(run, &dir)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A checkpoint folder with every file (their contents do not matter here) at `step`.
+    fn fake(run: &Path, step: u64) -> PathBuf {
+        let dir = run.join(CHECKPOINTS).join(format!("step-{step:08}"));
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in [GENERATOR, DISCRIMINATOR, GENERATOR_OPTIM, DISCRIMINATOR_OPTIM] {
+            std::fs::write(dir.join(f), b"x").unwrap();
+        }
+        let state = TrainState {
+            step,
+            ..TrainState::new()
+        };
+        std::fs::write(dir.join(STATE), serde_json::to_vec(&state).unwrap()).unwrap();
+        dir
+    }
+
+    fn point_latest_at(run: &Path, name: &str) {
+        std::fs::write(run.join(CHECKPOINTS).join(LATEST), name).unwrap();
+    }
+
+    #[test]
+    fn a_resume_takes_the_newest_whole_checkpoint_when_latest_was_caught_mid_replace() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path();
+        assert_eq!(latest(run).unwrap(), None);
+        let four = fake(run, 4);
+        let eight = fake(run, 8);
+        point_latest_at(run, "step-00000008");
+        assert_eq!(latest(run).unwrap(), Some(eight.clone()));
+        // Killed between renaming step 8 aside and renaming its replacement into place.
+        std::fs::rename(&eight, eight.with_file_name(".old-step-00000008")).unwrap();
+        assert_eq!(latest(run).unwrap(), Some(four.clone()));
+        // A removal cut short leaves a folder without some files: not taken.
+        std::fs::remove_file(four.join(GENERATOR_OPTIM)).unwrap();
+        let message = latest(run).unwrap_err().to_string();
+        assert!(message.contains("no other checkpoint is whole"), "{message}");
+        remove_leftovers(&run.join(CHECKPOINTS)).unwrap();
+        assert!(!eight.with_file_name(".old-step-00000008").exists());
+    }
+
+    #[test]
+    fn best_is_restored_when_a_kill_came_between_checkpoint_and_copy() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path();
+        keep_as_best(run, &fake(run, 4)).unwrap();
+        fake(run, 8);
+        let state = TrainState {
+            step: 8,
+            best_step: Some(8),
+            ..TrainState::new()
+        };
+        assert_eq!(best_step(run), Some(4));
+        restore_best(run, &state).unwrap();
+        assert_eq!(best_step(run), Some(8));
+        std::fs::remove_dir_all(run.join(BEST)).unwrap();
+        restore_best(run, &state).unwrap();
+        assert_eq!(best_step(run), Some(8));
+    }
 }

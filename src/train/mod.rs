@@ -344,11 +344,16 @@ fn read_log(path: &Path, step: u64) -> Result<Vec<LogRecord>, TrainError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(e) => return Err(io_err(path)(e)),
     };
-    Ok(text
-        .lines()
+    Ok(parse_log(&text, step))
+}
+
+/// The records of a `log.jsonl` up to `step`; a line that does not parse (the torn last line
+/// of a killed run) is dropped.
+pub fn parse_log(text: &str, step: u64) -> Vec<LogRecord> {
+    text.lines()
         .filter_map(|l| serde_json::from_str::<LogRecord>(l).ok())
         .filter(|r| r.step() <= step)
-        .collect())
+        .collect()
 }
 
 struct RunLog {
@@ -591,6 +596,7 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
                 settings.optim.clone(),
                 &autodiff,
             )?;
+            checkpoint::restore_best(run, &state)?;
             monitor.message(&format!("resuming from {} (step {})", dir.display(), state.step));
             (gan, state)
         }
@@ -603,13 +609,11 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
                 ),
             })
         }
-        None if job.resume => {
-            return Err(TrainError::Run {
-                path: run.clone(),
-                problem: "no checkpoint to resume from".into(),
-            })
-        }
         None => {
+            if job.resume {
+                // Killed before its first checkpoint: nothing was kept, so it starts over.
+                monitor.message("no checkpoint yet: starting from step 0");
+            }
             autodiff.seed(settings.seed);
             let gan = match &settings.init {
                 Some(init) => {
@@ -794,7 +798,11 @@ pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError>
     };
     for name in [GENERATOR_WEIGHTS, DISCRIMINATOR_WEIGHTS] {
         let weights = run.join(name);
-        std::fs::copy(dir.join(name), &weights).map_err(io_err(&weights))?;
+        // Copied whole or not at all, so a kill here leaves no cut-off weights file.
+        atomic_write(&weights, |w| {
+            std::io::copy(&mut std::fs::File::open(dir.join(name))?, w).map(|_| ())
+        })
+        .map_err(io_err(&weights))?;
     }
     log.draw(run)?;
     Ok(Summary {

@@ -1,0 +1,10 @@
+#![no_main]
+//! The pcd point cloud reader: any bytes give a cloud or an error, never a panic, a hang or an
+//! allocation the file cannot back.
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let path = mvpcc_fuzz::file("input.pcd", data);
+    let _ = mvpcc::io::read_cloud(&path, None);
+});

@@ -219,11 +219,11 @@ for model in built-in "$run"; do
     python3 - "$work/complete.json" "$model" >>"$profiles" <<'PY'
 import json, statistics, sys
 try:
-    reports = json.load(open(sys.argv[1]))
-except ValueError:
+    reports = json.load(open(sys.argv[1]))["results"]
+except (ValueError, KeyError):
     reports = []
-seconds = [r["seconds"] for r in reports if "seconds" in r]
-failed = sum("error" in r for r in reports)
+seconds = [r["seconds"] for r in reports if r["status"] == "completed"]
+failed = sum(r["status"] == "failed" for r in reports)
 line = f"mvpcc complete, model {sys.argv[2]}, {len(seconds)} files completed, {failed} failed"
 seconds = seconds[1:] or seconds
 if seconds:

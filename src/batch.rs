@@ -190,7 +190,9 @@ mod tests {
 
     #[test]
     fn shards_are_disjoint_cover_everything_and_stay_put() {
-        let keys: Vec<String> = (0..1000).map(|i| format!("city/block{i}/car.ply")).collect();
+        let keys: Vec<String> = (0..1000)
+            .map(|i| format!("city/block{i}/car.ply"))
+            .collect();
         for n in [1, 3, 7] {
             let mut counts = vec![0usize; n];
             for key in &keys {
@@ -241,7 +243,10 @@ mod tests {
             read_list(&list, base).unwrap(),
             ["a.ply", "b/c.pcd", "d.las"].map(PathBuf::from)
         );
-        for (bad, why) in [("../x.ply", "climbs out"), ("/elsewhere/x.ply", "not under")] {
+        for (bad, why) in [
+            ("../x.ply", "climbs out"),
+            ("/elsewhere/x.ply", "not under"),
+        ] {
             std::fs::write(&list, format!("a.ply\n{bad}\n")).unwrap();
             let message = read_list(&list, base).unwrap_err().to_string();
             assert!(

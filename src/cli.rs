@@ -10,7 +10,7 @@ use crate::frame::UpAxis;
 use crate::io::{Encoding, Format};
 use crate::mesh::SignedAxis;
 use crate::model::loss::Adversarial;
-use crate::model::{Channels, Formulation, ModelConfig, Padding, Preset};
+use crate::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
 use crate::orient::OrientMode;
 use crate::scan::PartialKinds;
 use crate::synth::Category;
@@ -142,6 +142,11 @@ pub struct EvalArgs {
     /// frame), with means per category and per partial protocol.
     #[arg(long, requires = "pred_dir", conflicts_with = "gt_dir")]
     pub data: Option<PathBuf>,
+    /// With --data: the fine ground truth (gt.ply, every point the rig saw) or the paper's
+    /// coarse one (gt_coarse.ply: 16,384 of them by farthest point sampling; computed when an
+    /// older data directory lacks it).
+    #[arg(long, value_enum, default_value_t = GroundTruth::Fine, requires = "data")]
+    pub ground_truth: GroundTruth,
     /// Directory of ground-truth clouds.
     #[arg(long, requires = "pred_dir")]
     pub gt_dir: Option<PathBuf>,
@@ -162,6 +167,14 @@ pub struct EvalArgs {
     pub json: bool,
     #[command(flatten)]
     pub input: InputOptions,
+}
+
+/// Which ground truth `eval --data` scores against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GroundTruth {
+    Fine,
+    Coarse,
 }
 
 /// A list of rig cameras as typed on the command line (`5,6,7,8`).
@@ -550,6 +563,10 @@ pub struct TrainArgs {
     /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).
     #[arg(long)]
     pub size: Option<usize>,
+    /// Where the views meet: late (the bottleneck features, the paper's network) or early (the
+    /// input images, before the shared encoder; the paper's Table 6) [default: the config's].
+    #[arg(long, value_enum)]
+    pub fusion: Option<Fusion>,
     /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
     /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
     /// a folder holding model.safetensors and discriminator.safetensors (as assets/). The model

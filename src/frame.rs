@@ -141,7 +141,10 @@ impl Frame {
             return Err("the frame's centre is not finite".into());
         }
         if !(self.extent.is_finite() && self.extent > 0.0) {
-            return Err(format!("the frame's extent {} is not positive", self.extent));
+            return Err(format!(
+                "the frame's extent {} is not positive",
+                self.extent
+            ));
         }
         let gram = mat_mul(&self.rotation, &transposed(&self.rotation));
         let off = (0..3)

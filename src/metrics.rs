@@ -93,6 +93,128 @@ pub struct ImageMetrics {
 }
 
 /// Mean absolute error over all samples.
+/// Points of the paper's coarse ground truth (Tables 1–2).
+pub const COARSE_POINTS: usize = 16_384;
+
+/// Indices of `n` of `points` chosen by farthest point sampling: starting from the first point,
+/// each next one is the point farthest from those already chosen (ties to the lower index). All
+/// of them, in order, when there are no more than `n`. Deterministic, so a coarse ground truth
+/// is the same wherever it is computed.
+///
+/// Exact, but not quadratic in practice: the points are bucketed in a grid, and a chosen point
+/// only visits the cells it can bring nearer, which shrink as the sampling proceeds.
+pub fn farthest_point_sample(points: &[[f64; 3]], n: usize) -> Vec<usize> {
+    if points.len() <= n {
+        return (0..points.len()).collect();
+    }
+    let mut grid = FpsGrid::new(points);
+    let mut chosen = Vec::with_capacity(n);
+    let mut next = 0;
+    while chosen.len() < n {
+        chosen.push(next);
+        next = grid.add_center(points[next]);
+    }
+    chosen
+}
+
+/// Points sorted into grid cells, each point's squared distance to the nearest chosen centre,
+/// and each cell's farthest point.
+struct FpsGrid {
+    /// Per cell: its box (lower and upper corner), the range of `order` it holds, and its
+    /// farthest point as (squared distance, index).
+    cells: Vec<([f64; 3], [f64; 3], std::ops::Range<usize>, (f64, usize))>,
+    order: Vec<usize>,
+    sorted: Vec<[f64; 3]>,
+    nearest: Vec<f64>,
+}
+
+impl FpsGrid {
+    fn new(points: &[[f64; 3]]) -> FpsGrid {
+        let (lo, hi) = points.iter().fold(
+            ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |(lo, hi), p| {
+                (
+                    [0, 1, 2].map(|k| lo[k].min(p[k])),
+                    [0, 1, 2].map(|k| hi[k].max(p[k])),
+                )
+            },
+        );
+        // About 32 points per cell.
+        let side = ((points.len() / 32).max(1) as f64).cbrt().ceil() as usize;
+        let cell_of = |p: &[f64; 3]| {
+            let at = |k: usize| {
+                let span = hi[k] - lo[k];
+                let t = if span > 0.0 {
+                    (p[k] - lo[k]) / span
+                } else {
+                    0.0
+                };
+                ((t * side as f64) as usize).min(side - 1)
+            };
+            (at(0) * side + at(1)) * side + at(2)
+        };
+        let mut order: Vec<usize> = (0..points.len()).collect();
+        order.sort_by_key(|&i| (cell_of(&points[i]), i));
+        let mut cells = Vec::new();
+        let mut start = 0;
+        while start < order.len() {
+            let cell = cell_of(&points[order[start]]);
+            let end = start
+                + order[start..]
+                    .iter()
+                    .take_while(|&&i| cell_of(&points[i]) == cell)
+                    .count();
+            let (mut a, mut b) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+            for &i in &order[start..end] {
+                a = [0, 1, 2].map(|k| a[k].min(points[i][k]));
+                b = [0, 1, 2].map(|k| b[k].max(points[i][k]));
+            }
+            cells.push((a, b, start..end, (f64::INFINITY, order[start])));
+            start = end;
+        }
+        let sorted = order.iter().map(|&i| points[i]).collect();
+        FpsGrid {
+            cells,
+            order,
+            sorted,
+            nearest: vec![f64::INFINITY; points.len()],
+        }
+    }
+
+    /// Takes `c` as a chosen centre; the index of the point now farthest from all centres.
+    fn add_center(&mut self, c: [f64; 3]) -> usize {
+        let mut best = (f64::NEG_INFINITY, usize::MAX);
+        for (lo, hi, range, far) in &mut self.cells {
+            // No point of the cell is nearer to c than its box; if that is no nearer than its
+            // farthest point's distance, c changes nothing there.
+            let gap: f64 = (0..3)
+                .map(|k| (lo[k] - c[k]).max(c[k] - hi[k]).max(0.0).powi(2))
+                .sum();
+            if gap < far.0 {
+                *far = (f64::NEG_INFINITY, usize::MAX);
+                for j in range.clone() {
+                    let p = self.sorted[j];
+                    let (x, y, z) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                    let d = &mut self.nearest[j];
+                    *d = d.min(x * x + y * y + z * z);
+                    *far = later_if_farther(*far, (*d, self.order[j]));
+                }
+            }
+            best = later_if_farther(best, *far);
+        }
+        best.1
+    }
+}
+
+/// The farther of two (squared distance, index) pairs; the lower index on a tie.
+fn later_if_farther(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
+    if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+        b
+    } else {
+        a
+    }
+}
+
 pub fn mae(a: &[f32], b: &[f32]) -> f64 {
     assert_eq!(a.len(), b.len());
     a.iter()
@@ -186,6 +308,49 @@ pub fn compare_images(a: &[f32], b: &[f32], size: usize) -> ImageMetrics {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn farthest_point_sampling_spreads_over_the_cloud() {
+        // A dense cluster of 1000 points at the origin and the 8 corners of a unit cube: the
+        // first 9 picks are one cluster point and the corners, whatever the cluster's size.
+        let mut points: Vec<[f64; 3]> = (0..1000).map(|i| [i as f64 * 1e-6, 0.0, 0.0]).collect();
+        for c in 0..8 {
+            points.push([0, 1, 2].map(|k| if c >> k & 1 == 1 { 2.0 } else { -2.0 }));
+        }
+        let picked = super::farthest_point_sample(&points, 9);
+        assert_eq!(picked[0], 0);
+        let mut corners = picked[1..].to_vec();
+        corners.sort();
+        assert_eq!(corners, (1000..1008).collect::<Vec<_>>());
+        assert_eq!(
+            super::farthest_point_sample(&points[..5], 9),
+            [0, 1, 2, 3, 4]
+        );
+    }
+
+    #[test]
+    fn farthest_point_sampling_with_a_grid_equals_the_plain_definition() {
+        let mut rng = crate::shapes::Lcg::new(3);
+        let points: Vec<[f64; 3]> = (0..3000)
+            .map(|_| [rng.next_f64(), rng.next_f64() * 0.3, rng.next_f64() * 2.0])
+            .collect();
+        let n = 400;
+        let mut plain = vec![0];
+        let mut nearest = vec![f64::INFINITY; points.len()];
+        while plain.len() < n {
+            let c = points[*plain.last().unwrap()];
+            let mut best = (f64::NEG_INFINITY, 0);
+            for (i, p) in points.iter().enumerate() {
+                let e: f64 = (0..3).map(|k| (p[k] - c[k]).powi(2)).sum();
+                nearest[i] = nearest[i].min(e);
+                if nearest[i] > best.0 {
+                    best = (nearest[i], i);
+                }
+            }
+            plain.push(best.1);
+        }
+        assert_eq!(super::farthest_point_sample(&points, n), plain);
+    }
+
     use super::*;
 
     #[test]

@@ -86,8 +86,8 @@ impl ViewsInfo {
     /// Parses a `frame.json`, refusing frames that cannot map points back (zero or non-finite
     /// scale or offsets).
     pub fn from_json(bytes: &[u8]) -> Result<ViewsInfo, String> {
-        let info: ViewsInfo = serde_json::from_slice(bytes)
-            .map_err(|e| format!("not a valid frame file: {e}"))?;
+        let info: ViewsInfo =
+            serde_json::from_slice(bytes).map_err(|e| format!("not a valid frame file: {e}"))?;
         info.frame.check()?;
         Ok(info)
     }
@@ -178,20 +178,18 @@ fn open(path: &Path) -> Result<image::DynamicImage, ViewError> {
     limits.max_image_width = Some(MAX_VIEW_SIZE);
     limits.max_image_height = Some(MAX_VIEW_SIZE);
     reader.limits(limits);
-    reader
-        .decode()
-        .map_err(|e| match e {
-            image::ImageError::Limits(_) => ViewError::Invalid {
-                path: path.to_path_buf(),
-                problem: format!(
-                    "the image exceeds {MAX_VIEW_SIZE}×{MAX_VIEW_SIZE} px, the largest view read"
-                ),
-            },
-            e => ViewError::Decode {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            },
-        })
+    reader.decode().map_err(|e| match e {
+        image::ImageError::Limits(_) => ViewError::Invalid {
+            path: path.to_path_buf(),
+            problem: format!(
+                "the image exceeds {MAX_VIEW_SIZE}×{MAX_VIEW_SIZE} px, the largest view read"
+            ),
+        },
+        e => ViewError::Decode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        },
+    })
 }
 
 /// Rig cameras that have a `locations_NNN.png` in `dir`, ascending.

@@ -664,7 +664,13 @@ fn prepare_shards_share_one_folder_and_a_last_run_writes_the_manifest() {
     assert_eq!(made, 5, "the shards together prepare each mesh once");
     let last = prepare(&[]);
     assert_eq!((&last["models"], &last["resumed"]), (&5.into(), &5.into()));
-    assert_eq!(read_json(&data.join("manifest.json"))["models"].as_array().unwrap().len(), 5);
+    assert_eq!(
+        read_json(&data.join("manifest.json"))["models"]
+            .as_array()
+            .unwrap()
+            .len(),
+        5
+    );
 }
 
 #[test]
@@ -730,7 +736,59 @@ fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings()
         assert!(loaded.colors.is_some());
         let b = loaded.bounds().unwrap();
         assert!(b.min.iter().chain(&b.max).all(|c| c.abs() <= 0.5 + 1e-6));
+        // The coarse ground truth is written beside the partials `eval` scores.
+        let coarse_path = gt_cloud.with_file_name("gt_coarse.ply");
+        assert_eq!(coarse_path.exists(), split == "test");
+        if split != "test" {
+            continue;
+        }
+        let coarse = read_cloud(&coarse_path, None).unwrap().cloud;
+        assert_eq!(coarse.len(), loaded.len().min(16_384));
+        let fine: std::collections::HashSet<[u64; 3]> = loaded
+            .positions
+            .iter()
+            .map(|p| p.map(f64::to_bits))
+            .collect();
+        assert!(coarse
+            .positions
+            .iter()
+            .all(|p| fine.contains(&p.map(f64::to_bits))));
     }
+    // The test partials, completed as they are, scored on either ground truth.
+    let pred = dir.path().join("pred");
+    mvpcc()
+        .args([
+            "complete",
+            "--method",
+            "identity",
+            "--include",
+            "partial_*.ply",
+            "-q",
+        ])
+        .arg("--input-dir")
+        .arg(data.join("clouds/test"))
+        .arg("--output-dir")
+        .arg(&pred)
+        .assert()
+        .success();
+    let scores: Vec<serde_json::Value> = ["fine", "coarse"]
+        .iter()
+        .map(|gt| {
+            eval_json(&[
+                "--data",
+                s(&data),
+                "--pred-dir",
+                s(&pred),
+                "--ground-truth",
+                gt,
+            ])
+        })
+        .collect();
+    assert_eq!(scores[1]["ground_truth"], "coarse");
+    let f1 = |v: &serde_json::Value| v["groups"]["all"]["fscore"][0]["f1"].as_f64().unwrap();
+    assert!(f1(&scores[0]) > 0.0 && f1(&scores[1]) > 0.0, "{scores:?}");
+    // A partial covers a coarse ground truth no better than the fine one it was sampled from.
+    assert_ne!(f1(&scores[0]), f1(&scores[1]));
     // A second run finds everything done.
     run(&[])
         .success()

@@ -258,7 +258,10 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .stderr(predicate::str::contains("panicked").not());
     let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
     assert_eq!(report["results"].as_array().unwrap().len(), 4);
-    assert_eq!((&report["completed"], &report["failed"]), (&2.into(), &2.into()));
+    assert_eq!(
+        (&report["completed"], &report["failed"]),
+        (&2.into(), &2.into())
+    );
     let failed: Vec<&str> = report["results"]
         .as_array()
         .unwrap()
@@ -266,7 +269,10 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .filter(|r| r["status"] == "failed")
         .map(|r| r["input"].as_str().unwrap())
         .collect();
-    assert!(failed.iter().any(|f| f.ends_with("broken.ply")), "{failed:?}");
+    assert!(
+        failed.iter().any(|f| f.ends_with("broken.ply")),
+        "{failed:?}"
+    );
     assert!(
         read_cloud(&outputs.join("a.ply"), None)
             .unwrap()
@@ -316,7 +322,14 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
     let inputs = dir.path().join("in");
     let outputs = dir.path().join("out");
     std::fs::create_dir_all(inputs.join("block")).unwrap();
-    let names = ["a.ply", "b.ply", "c.ply", "block/d.ply", "block/e.ply", "block/f.ply"];
+    let names = [
+        "a.ply",
+        "b.ply",
+        "c.ply",
+        "block/d.ply",
+        "block/e.ply",
+        "block/f.ply",
+    ];
     for (i, name) in names.iter().enumerate() {
         let cloud = shapes::scanned_side(&shapes::car(3000, i as u64));
         write_cloud(&inputs.join(name), &cloud, None, Encoding::Binary).unwrap();
@@ -329,7 +342,10 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
         taken.extend(completed);
     }
     taken.sort();
-    let mut all: Vec<String> = names.iter().map(|n| s(&inputs.join(n)).to_string()).collect();
+    let mut all: Vec<String> = names
+        .iter()
+        .map(|n| s(&inputs.join(n)).to_string())
+        .collect();
     all.sort();
     assert_eq!(taken, all, "the shards together take each file once");
 
@@ -343,7 +359,11 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
     let list = dir.path().join("list.txt");
     let listed = dir.path().join("listed");
     let absolute = inputs.join("c.ply");
-    std::fs::write(&list, format!("# two of them\nblock/d.ply\n{}\n", s(&absolute))).unwrap();
+    std::fs::write(
+        &list,
+        format!("# two of them\nblock/d.ply\n{}\n", s(&absolute)),
+    )
+    .unwrap();
     let (completed, _) = batch_run(&[
         "--list",
         s(&list),
@@ -356,7 +376,13 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
     assert!(listed.join("block/d.ply").is_file() && listed.join("c.ply").is_file());
 
     mvpcc()
-        .args(["complete", "--input-dir", s(&inputs), "--output-dir", s(&outputs)])
+        .args([
+            "complete",
+            "--input-dir",
+            s(&inputs),
+            "--output-dir",
+            s(&outputs),
+        ])
         .args(["--shard", "3/3"])
         .assert()
         .failure()

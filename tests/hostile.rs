@@ -22,8 +22,14 @@ fn refused(args: &[&str], names: &str, problem: &str) {
     assert_eq!(output.status.code(), Some(1), "{args:?}: {stderr}");
     let lines: Vec<&str> = stderr.lines().collect();
     assert_eq!(lines.len(), 1, "one line expected: {stderr}");
-    assert!(lines[0].starts_with("error: ") && lines[0].contains(names), "{stderr}");
-    assert!(lines[0].contains(problem), "{stderr} should say {problem:?}");
+    assert!(
+        lines[0].starts_with("error: ") && lines[0].contains(names),
+        "{stderr}"
+    );
+    assert!(
+        lines[0].contains(problem),
+        "{stderr} should say {problem:?}"
+    );
 }
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
@@ -73,12 +79,24 @@ fn clouds_whose_headers_claim_billions_of_points() {
     compressed.extend(1000u32.to_le_bytes());
     compressed.extend([0; 12]);
     let cases = [
-        ("binary.ply", ply("binary_little_endian", &[0; 120]), PLY_CLAIM),
+        (
+            "binary.ply",
+            ply("binary_little_endian", &[0; 120]),
+            PLY_CLAIM,
+        ),
         ("ascii.ply", ply("ascii", b"1 2 3\n"), PLY_CLAIM),
         ("ascii.pcd", pcd("ascii", b"1 2 3\n"), PCD_CLAIM),
         ("binary.pcd", pcd("binary", &[0; 120]), PCD_CLAIM),
-        ("compressed.pcd", pcd("binary_compressed", &compressed), PCD_CLAIM),
-        ("cut.ply", ply_of(below, "binary_little_endian", &[0; 120]), cut),
+        (
+            "compressed.pcd",
+            pcd("binary_compressed", &compressed),
+            PCD_CLAIM,
+        ),
+        (
+            "cut.ply",
+            ply_of(below, "binary_little_endian", &[0; 120]),
+            cut,
+        ),
         ("cut_ascii.ply", ply_of(below, "ascii", b"1 2 3\n"), cut),
         ("cut.pcd", pcd_of(below, "binary", &[0; 120]), cut),
         ("cut_ascii.pcd", pcd_of(below, "ascii", b"1 2 3\n"), cut),
@@ -154,7 +172,11 @@ fn crc32(bytes: &[u8]) -> u32 {
     !bytes.iter().fold(!0u32, |mut c, &b| {
         c ^= u32::from(b);
         for _ in 0..8 {
-            c = if c & 1 == 1 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 };
+            c = if c & 1 == 1 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
         }
         c
     })
@@ -213,7 +235,9 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
     let car = mvpcc::shapes::scanned_side(&mvpcc::shapes::car(3000, 1));
     write_cloud(&input, &car, None, Encoding::Binary).unwrap();
     let out = d.join("out.ply");
-    let garbage: Vec<u8> = (0..4096u32).map(|i| (i.wrapping_mul(2654435761) >> 13) as u8).collect();
+    let garbage: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
     let generator_with = |field: &str, value: usize| {
         let mut config = serde_json::json!({"width": 16, "res_blocks": 2, "size": 64, "views": 4,
             "channels": "xyzrgb", "padding": "zero", "disc_width": 16});
@@ -223,7 +247,11 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
     let generator = |field: &str| generator_with(field, 100_000_000);
     let cases = [
         ("garbage.safetensors", garbage, "not a safetensors file"),
-        ("deep.safetensors", generator("res_blocks"), "residual blocks 100000000"),
+        (
+            "deep.safetensors",
+            generator("res_blocks"),
+            "residual blocks 100000000",
+        ),
         ("wide.safetensors", generator("width"), "width 100000000"),
         (
             "empty.safetensors",
@@ -242,10 +270,21 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
     let orienter = write(
         d,
         "orienter.safetensors",
-        &declared("orienter", r#"{"point_widths":[100000000],"hidden":8,"points":64}"#),
+        &declared(
+            "orienter",
+            r#"{"point_widths":[100000000],"hidden":8,"points":64}"#,
+        ),
     );
     refused(
-        &["complete", s(&input), s(&out), "--orient", "learned", "--orienter", s(&orienter)],
+        &[
+            "complete",
+            s(&input),
+            s(&out),
+            "--orient",
+            "learned",
+            "--orienter",
+            s(&orienter),
+        ],
         "orienter.safetensors",
         "a layer 100000000 wide",
     );

@@ -219,7 +219,7 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
 }
 
 #[test]
-fn loss_weights_and_the_adversarial_loss_are_options_kept_in_the_run() {
+fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     #[rustfmt::skip]
@@ -227,8 +227,20 @@ fn loss_weights_and_the_adversarial_loss_are_options_kept_in_the_run() {
         "--loss-l1", "10", "--loss-adversarial", "0.2", "--loss-perceptual", "250",
         "--loss-style", "0.1", "--loss-bce", "1", "--loss-tv", "0.5",
         "--adversarial", "non-saturating", "--tv-from-stage", "1", "--val-every", "0",
+        "--fusion", "early",
     ];
     train(&run, 2, &options).assert().success();
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["fusion"], "early");
+    let bytes = std::fs::read(run.join("generator.safetensors")).unwrap();
+    let (_, config) = generator_from_bytes(&bytes, &Device::flex()).unwrap();
+    assert_eq!(config.fusion(), mvpcc::model::Fusion::Early);
+    base(&run)
+        .args(["--resume", "--fusion", "late"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("fusion"));
     let settings: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("train.json")).unwrap()).unwrap();
     let loss = &settings["loss"];
@@ -382,7 +394,14 @@ fn ctrl_c_saves_a_checkpoint_and_the_run_resumes_from_it() {
 fn kill_when(run: &Path, resume: bool, ready: impl Fn(&Path) -> bool) {
     let mut cmd = base_std(run);
     cmd.args(["--config", "tiny", "--batch", "1", "--val-every", "2"])
-        .args(["--val-samples", "2", "--log-every", "1", "--checkpoint-every", "1"])
+        .args([
+            "--val-samples",
+            "2",
+            "--log-every",
+            "1",
+            "--checkpoint-every",
+            "1",
+        ])
         .args(["--keep", "2", "--steps", "1000"])
         .stderr(std::process::Stdio::null());
     if resume {

@@ -395,8 +395,14 @@ struct BatchReport {
 enum BatchEntry {
     Completed(FileReport),
     /// `--skip-existing` found the output.
-    Skipped { input: PathBuf, output: PathBuf },
-    Failed { input: PathBuf, error: String },
+    Skipped {
+        input: PathBuf,
+        output: PathBuf,
+    },
+    Failed {
+        input: PathBuf,
+        error: String,
+    },
 }
 
 /// The batch's inputs relative to its root, this shard's only: the list's, or the cloud files

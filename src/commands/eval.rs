@@ -1,7 +1,7 @@
 use super::{load, Log};
-use crate::cli::{EvalArgs, Metric, Normalize};
+use crate::cli::{EvalArgs, GroundTruth, Metric, Normalize};
 use crate::cloud::PointCloud;
-use crate::data::{Layout, Manifest, TEST};
+use crate::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
 use crate::frame::{Frame, UpAxis};
 use crate::io::Format;
 use crate::metrics::{compare_clouds, compare_images, CloudMetrics, ImageMetrics};
@@ -177,6 +177,15 @@ fn find_prediction(dir: &Path, k: usize) -> Option<PathBuf> {
         })
 }
 
+/// A model's ground truth; a coarse one that an older `prepare` did not write is sampled from
+/// the fine one beside it.
+fn load_ground_truth(path: &Path, log: Log) -> anyhow::Result<PointCloud> {
+    if path.ends_with(GT_COARSE) && !path.exists() {
+        return Ok(coarse(&load(&path.with_file_name(GT_FINE), None, log)?));
+    }
+    load(path, None, log)
+}
+
 fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyhow::Result<()> {
     let manifest_path = data.join("manifest.json");
     let text = std::fs::read_to_string(&manifest_path).with_context(|| {
@@ -193,9 +202,11 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
     let mut samples = Vec::new();
     let mut missing = Vec::new();
     for model in manifest.models.iter().filter(|m| m.split == TEST) {
-        let gt = layout
-            .clouds(&model.split, &model.category, &model.name)
-            .join("gt.ply");
+        let clouds = layout.clouds(&model.split, &model.category, &model.name);
+        let gt = match args.ground_truth {
+            GroundTruth::Fine => clouds.join(GT_FINE),
+            GroundTruth::Coarse => clouds.join(GT_COARSE),
+        };
         let dir = pred_dir.join(&model.category).join(&model.name);
         for sample in &model.samples {
             let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
@@ -232,7 +243,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
         .iter()
         .map(|s| {
             let pred = load(&s.pred, None, log)?;
-            let gt = load(&s.gt, None, log)?;
+            let gt = load_ground_truth(&s.gt, log)?;
             let turned: Vec<[f64; 3]> = pred
                 .positions
                 .iter()
@@ -257,6 +268,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
     let mut out = Map::new();
     out.insert("data".into(), json!(data.display().to_string()));
     out.insert("pred_dir".into(), json!(pred_dir.display().to_string()));
+    out.insert("ground_truth".into(), json!(args.ground_truth));
     out.insert("thresholds".into(), json!(args.tau));
     let mut group_json = Map::new();
     for (key, ms) in groups.iter().chain([(&"all".to_string(), &results)]) {

@@ -145,7 +145,10 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
     let fresh_model = |mut base: ModelConfig| {
         base.channels = args.channels.unwrap_or(base.channels);
         base.size = args.size.unwrap_or(base.size);
-        base
+        match args.fusion {
+            Some(fusion) => base.with_fusion_kind(fusion),
+            None => base,
+        }
     };
     let (settings, mut model) = if args.resume {
         let saved: TrainSettings = read_saved(&run.join(SETTINGS_FILE))?;

@@ -7,7 +7,9 @@ mod prepare;
 pub use prepare::{finished, prepare_model, PrepareError};
 
 use crate::batch::{walk, BatchError};
+use crate::cloud::PointCloud;
 use crate::mesh::{MeshStats, MESH_EXTENSIONS};
+use crate::metrics::{farthest_point_sample, COARSE_POINTS};
 use crate::scan::{PartialParams, PartialSpec};
 use crate::shapes::derive_seed;
 use serde::{Deserialize, Serialize};
@@ -17,6 +19,16 @@ pub const TRAIN: &str = "train";
 pub const TEST: &str = "test";
 /// Written into a model's cloud directory last; a model without it is redone.
 pub const DONE_FILE: &str = "done.json";
+/// The ground truth beside a model's partials: every point the rig saw, one per voxel.
+pub const GT_FINE: &str = "gt.ply";
+/// The paper's coarse ground truth: [`crate::metrics::COARSE_POINTS`] of the fine one by
+/// farthest point sampling.
+pub const GT_COARSE: &str = "gt_coarse.ply";
+
+/// The coarse ground truth of a fine one (see [`GT_COARSE`]).
+pub fn coarse(fine: &PointCloud) -> PointCloud {
+    fine.select(&farthest_point_sample(&fine.positions, COARSE_POINTS))
+}
 pub const MANIFEST_FILE: &str = "manifest.json";
 /// The parameters a data directory was started with, so a resumed run cannot mix settings.
 pub const PARAMS_FILE: &str = "prepare.json";

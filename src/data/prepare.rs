@@ -1,7 +1,8 @@
 //! One mesh → ground truth, partial samples, their view images and clouds.
 
 use super::{
-    split_of, CloudPolicy, Layout, ModelEntry, PrepareParams, SampleEntry, Source, DONE_FILE, TEST,
+    coarse, split_of, CloudPolicy, Layout, ModelEntry, PrepareParams, SampleEntry, Source,
+    DONE_FILE, GT_COARSE, GT_FINE, TEST,
 };
 use crate::camera::Camera;
 use crate::cloud::PointCloud;
@@ -168,12 +169,22 @@ pub fn prepare_model(
         })
         .collect::<Result<Vec<_>, PrepareError>>()?;
     let gt_points = gt.len();
+    let gt_cloud = cloud_of(gt);
     write_cloud(
-        &clouds_dir.join("gt.ply"),
-        &cloud_of(gt),
+        &clouds_dir.join(GT_FINE),
+        &gt_cloud,
         Some(Format::Ply),
         Encoding::Binary,
     )?;
+    // Beside the partials `eval` scores: sampling is quadratic, so not for models nobody scores.
+    if keep_partials {
+        write_cloud(
+            &clouds_dir.join(GT_COARSE),
+            &coarse(&gt_cloud),
+            Some(Format::Ply),
+            Encoding::Binary,
+        )?;
+    }
     let entry = ModelEntry {
         category: source.category.clone(),
         name: source.name.clone(),

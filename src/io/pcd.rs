@@ -651,13 +651,14 @@ mod tests {
 
     #[test]
     fn a_compressed_size_no_lzf_block_can_reach_is_refused_before_allocating() {
-        // 357,913,941 points of 12 bytes: a 4 GiB block claimed by 10 compressed bytes.
+        // 150,000,000 points of 12 bytes (under the point limit): a 1.8 GB block claimed by 10
+        // compressed bytes.
         let header = "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n\
-                      COUNT 1 1 1\nWIDTH 357913941\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n\
-                      POINTS 357913941\nDATA binary_compressed\n";
+                      COUNT 1 1 1\nWIDTH 150000000\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n\
+                      POINTS 150000000\nDATA binary_compressed\n";
         let mut bytes = header.as_bytes().to_vec();
         bytes.extend_from_slice(&10u32.to_le_bytes());
-        bytes.extend_from_slice(&0xFFFF_FFFCu32.to_le_bytes());
+        bytes.extend_from_slice(&1_800_000_000u32.to_le_bytes());
         bytes.extend_from_slice(&[0u8; 10]);
         let err = read_bytes(&bytes).unwrap_err().to_string();
         assert!(err.contains("cannot hold"), "{err}");

@@ -3,7 +3,7 @@
 //! features beside the fused ones. Encoder and decoder weights are shared by the views.
 
 use super::layers::{ConvNorm, ConvSpec, LayerKind, Probe, ResBlock, UpNorm};
-use super::{ModelConfig, Padding};
+use super::{Fusion, ModelConfig, Padding};
 use burn::module::Module;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
@@ -18,6 +18,8 @@ pub struct Generator {
     head: ConvNorm,
     views: usize,
     channels: usize,
+    /// `fusion` reads the input images (early fusion) rather than the bottleneck features.
+    early_fusion: bool,
 }
 
 /// What the generator returns for a batch of objects.
@@ -42,8 +44,12 @@ impl Generator {
             norm: true,
             kind,
         };
+        let early_fusion = config.fusion() == Fusion::Early;
+        let planes = config.input_channels();
+        // Early fusion adds w fused planes to each view's input.
+        let stem_in = if early_fusion { planes + w } else { planes };
         let stem = ConvNorm::new(
-            conv([config.input_channels(), w], 7, 1, 3, LayerKind::Conv7x7),
+            conv([stem_in, w], 7, 1, 3, LayerKind::Conv7x7),
             padding,
             device,
         );
@@ -64,13 +70,20 @@ impl Generator {
             .collect();
         // The original's fusion convolution zero-pads; the config's padding mode is kept for
         // all same-size convolutions alike so `Padding::Zero` removes every reflection.
+        let fusion_channels = if early_fusion {
+            [config.views * planes, w]
+        } else {
+            [config.views * 4 * w, 4 * w]
+        };
         let fusion = ConvNorm::new(
-            conv([config.views * 4 * w, 4 * w], 3, 1, 1, LayerKind::Fusion),
+            conv(fusion_channels, 3, 1, 1, LayerKind::Fusion),
             Padding::Zero,
             device,
         );
+        // Late fusion puts the fused features beside each view's own.
+        let decoder_in = if early_fusion { 4 * w } else { 8 * w };
         let up = vec![
-            UpNorm::new([8 * w, 2 * w], device),
+            UpNorm::new([decoder_in, 2 * w], device),
             UpNorm::new([2 * w, w], device),
         ];
         let head = ConvNorm::new(
@@ -96,6 +109,7 @@ impl Generator {
             head,
             views: config.views,
             channels: config.channels.count(),
+            early_fusion,
         }
     }
 
@@ -113,7 +127,8 @@ impl Generator {
         self.decode(joined, batch, size, probe)
     }
 
-    /// The shared per-view encoder: stem, two stride-2 downsamplings, dilated residual blocks.
+    /// The shared per-view encoder: stem, two stride-2 downsamplings, dilated residual blocks
+    /// (after the fusion of the input images, with early fusion).
     ///
     /// # Shapes
     /// `input`: `[batch, views, channels + 1, S, S]` → `[batch · views, 4w, S/4, S/4]`
@@ -126,6 +141,11 @@ impl Generator {
         );
         assert_eq!(planes, self.channels + 1, "input planes");
         let x = input.reshape([batch * views, planes, size, size]); // [B·V, C+1, S, S]
+        let x = if self.early_fusion {
+            self.fuse_views(x, batch, probe) // [B·V, C+1+w, S, S]
+        } else {
+            x
+        };
 
         let mut x = self.stem.forward(x, probe);
         x = probe.layer(LayerKind::Elementwise, || relu(x));
@@ -139,31 +159,44 @@ impl Generator {
         x
     }
 
-    /// Feature fusion: one convolution over all views' features, its result beside each view's
-    /// own.
+    /// Late fusion of the encoder's features (nothing with early fusion, which happened in
+    /// [`Self::encode`]).
     ///
     /// # Shapes
-    /// `features`: `[batch · views, 4w, S/4, S/4]` → `[batch · views, 8w, S/4, S/4]`
+    /// `features`: `[batch · views, 4w, S/4, S/4]` → `[batch · views, 8w, S/4, S/4]` (late) or
+    /// unchanged (early)
     pub fn fuse<P: Probe>(&self, features: Tensor<4>, batch: usize, probe: &mut P) -> Tensor<4> {
+        if self.early_fusion {
+            return features;
+        }
+        self.fuse_views(features, batch, probe)
+    }
+
+    /// One convolution over all views' planes, its result beside each view's own.
+    ///
+    /// # Shapes
+    /// `x`: `[batch · views, c, h, w]` → `[batch · views, c + f, h, w]`, `f` the fusion
+    /// convolution's output channels
+    fn fuse_views<P: Probe>(&self, x: Tensor<4>, batch: usize, probe: &mut P) -> Tensor<4> {
         let views = self.views;
-        let [_, feat, fh, fw] = features.dims(); // [B·V, 4w, S/4, S/4]
-        let all = features.clone().reshape([batch, views * feat, fh, fw]); // [B, V·4w, S/4, S/4]
-        let fused = self.fusion.forward(all, probe);
+        let [_, c, h, w] = x.dims(); // [B·V, c, h, w]
+        let all = x.clone().reshape([batch, views * c, h, w]); // [B, V·c, h, w]
+        let fused = self.fusion.forward(all, probe); // [B, f, h, w]
+        let [_, f, _, _] = fused.dims();
         let fused = probe.layer(LayerKind::Elementwise, || {
             relu(fused)
                 .unsqueeze_dim::<5>(1)
-                .expand([batch, views, feat, fh, fw])
-                .reshape([batch * views, feat, fh, fw])
-        }); // [B·V, 4w, S/4, S/4]
-        probe.layer(LayerKind::Elementwise, || {
-            Tensor::cat(vec![features, fused], 1)
-        }) // [B·V, 8w, S/4, S/4]
+                .expand([batch, views, f, h, w])
+                .reshape([batch * views, f, h, w])
+        }); // [B·V, f, h, w]
+        probe.layer(LayerKind::Elementwise, || Tensor::cat(vec![x, fused], 1)) // [B·V, c+f, h, w]
     }
 
     /// The shared per-view decoder.
     ///
     /// # Shapes
-    /// `x`: `[batch · views, 8w, S/4, S/4]` → images `[batch, views, channels, S, S]`,
+    /// `x`: `[batch · views, 8w (late) or 4w (early), S/4, S/4]` → images
+    /// `[batch, views, channels, S, S]`,
     /// occupancy `[batch, views, 1, S, S]`
     pub fn decode<P: Probe>(
         &self,
@@ -221,10 +254,17 @@ mod tests {
 
     #[test]
     fn views_are_fused_and_objects_are_not() {
-        // Changing view 0 of object 0 must change the other views of object 0 (through the
-        // fusion convolution) and leave object 1 alone.
+        for fusion in [Fusion::Late, Fusion::Early] {
+            views_are_fused_with(fusion);
+        }
+    }
+
+    /// Changing view 0 of object 0 must change the other views of object 0 (through the fusion
+    /// convolution) and leave object 1 alone.
+    fn views_are_fused_with(fusion: Fusion) {
         let device = Device::flex();
-        let g = Preset::Tiny.config().init_generator(&device).unwrap();
+        let config = Preset::Tiny.config().with_fusion_kind(fusion);
+        let g = config.init_generator(&device).unwrap();
         let shape = [2, 4, 7, 32, 32];
         let x = Tensor::<5>::random(shape, Distribution::Default, &device);
         let bump = Tensor::<5>::zeros(shape, &device).slice_assign(

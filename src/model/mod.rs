@@ -54,6 +54,19 @@ pub enum Padding {
     Zero,
 }
 
+/// Where the views' information meets (the paper's Table 6 compares the two).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Fusion {
+    /// One convolution over all views' bottleneck features, its result beside each view's own
+    /// before the shared decoder: the paper's network.
+    #[default]
+    Late,
+    /// One convolution over all views' input images at full resolution, its result beside each
+    /// view's own input before the shared encoder; the decoder sees its view's features only.
+    Early,
+}
+
 /// Shape of the generator and discriminator. Saved inside every weights file.
 #[derive(Config, Debug, PartialEq)]
 pub struct ModelConfig {
@@ -76,6 +89,9 @@ pub struct ModelConfig {
     /// Channels of the discriminator's first layer (64 in the 70×70 PatchGAN).
     #[config(default = 64)]
     pub disc_width: usize,
+    /// `Some(Fusion::Early)` for early fusion; `None` is late fusion, as in every weights file
+    /// written before this choice existed (see [`ModelConfig::fusion`]).
+    pub fusion: Option<Fusion>,
 }
 
 /// Named model shapes; `mvpcc profile` and `mvpcc train` take these names.
@@ -176,6 +192,16 @@ impl ModelConfig {
         Ok(())
     }
 
+    pub fn fusion(&self) -> Fusion {
+        self.fusion.unwrap_or_default()
+    }
+
+    /// Sets the fusion, written as `None` when late so that configs compare equal to files
+    /// that predate the choice.
+    pub fn with_fusion_kind(self, fusion: Fusion) -> ModelConfig {
+        self.with_fusion((fusion == Fusion::Early).then_some(Fusion::Early))
+    }
+
     /// Image planes per view the generator reads: the channels plus the occupancy mask.
     pub fn input_channels(&self) -> usize {
         self.channels.count() + 1
@@ -207,8 +233,15 @@ impl ModelConfig {
             + q * q * 16.0 * 8.0 * w * 2.0 * w
             + (s / 2.0).powi(2) * 16.0 * 2.0 * w * w
             + s * s * 49.0 * w * cout;
-        let fusion = q * q * 9.0 * v * 4.0 * w * 4.0 * w;
-        2.0 * (v * per_view + fusion) / 1e9
+        let (fusion, extra) = match self.fusion() {
+            Fusion::Late => (q * q * 9.0 * v * 4.0 * w * 4.0 * w, 0.0),
+            // The fused planes widen the stem; the decoder's first layer reads half as much.
+            Fusion::Early => (
+                s * s * 9.0 * v * cin * w,
+                s * s * 49.0 * w * w - q * q * 16.0 * 4.0 * w * 2.0 * w,
+            ),
+        };
+        2.0 * (v * (per_view + extra) + fusion) / 1e9
     }
 }
 

@@ -188,9 +188,15 @@ fn remove_leftovers(root: &Path) -> Result<(), CheckpointError> {
 
 /// Whether checkpoint folder `dir` holds every file a resume reads.
 fn is_whole(dir: &Path) -> bool {
-    [STATE, GENERATOR, DISCRIMINATOR, GENERATOR_OPTIM, DISCRIMINATOR_OPTIM]
-        .iter()
-        .all(|f| dir.join(f).is_file())
+    [
+        STATE,
+        GENERATOR,
+        DISCRIMINATOR,
+        GENERATOR_OPTIM,
+        DISCRIMINATOR_OPTIM,
+    ]
+    .iter()
+    .all(|f| dir.join(f).is_file())
 }
 
 /// Checkpoint folders, oldest first.
@@ -331,7 +337,12 @@ mod tests {
     fn fake(run: &Path, step: u64) -> PathBuf {
         let dir = run.join(CHECKPOINTS).join(format!("step-{step:08}"));
         std::fs::create_dir_all(&dir).unwrap();
-        for f in [GENERATOR, DISCRIMINATOR, GENERATOR_OPTIM, DISCRIMINATOR_OPTIM] {
+        for f in [
+            GENERATOR,
+            DISCRIMINATOR,
+            GENERATOR_OPTIM,
+            DISCRIMINATOR_OPTIM,
+        ] {
             std::fs::write(dir.join(f), b"x").unwrap();
         }
         let state = TrainState {
@@ -361,7 +372,10 @@ mod tests {
         // A removal cut short leaves a folder without some files: not taken.
         std::fs::remove_file(four.join(GENERATOR_OPTIM)).unwrap();
         let message = latest(run).unwrap_err().to_string();
-        assert!(message.contains("no other checkpoint is whole"), "{message}");
+        assert!(
+            message.contains("no other checkpoint is whole"),
+            "{message}"
+        );
         remove_leftovers(&run.join(CHECKPOINTS)).unwrap();
         assert!(!eight.with_file_name(".old-step-00000008").exists());
     }

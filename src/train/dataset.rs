@@ -4,6 +4,7 @@
 //! optionally through a geometric augmentation.
 
 use crate::camera::Camera;
+use crate::data::GT_FINE;
 use crate::io::read_cloud;
 use crate::projection::{project, ViewImages, CHANNELS};
 use crate::shapes::{derive_seed, Lcg};
@@ -116,7 +117,7 @@ pub fn scan_split(root: &Path, split: &str) -> Result<Split, DataError> {
                 continue;
             }
             let clouds = root.join("clouds").join(split).join(&category).join(&name);
-            let clouds = clouds.join("gt.ply").is_file().then_some(clouds);
+            let clouds = clouds.join(GT_FINE).is_file().then_some(clouds);
             for sample in samples {
                 out.samples.push(SampleRef {
                     category: category.clone(),
@@ -406,7 +407,7 @@ pub fn gt_cloud(
     cameras: &[usize],
 ) -> Result<Vec<[f64; 3]>, DataError> {
     if let Some(dir) = &sample.clouds {
-        let path = dir.join("gt.ply");
+        let path = dir.join(GT_FINE);
         let loaded = read_cloud(&path, None).map_err(|e| DataError::Io {
             path: path.clone(),
             source: std::io::Error::other(e.to_string()),

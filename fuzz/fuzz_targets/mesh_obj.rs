@@ -10,6 +10,11 @@ fuzz_target!(|data: &[u8]| {
     mvpcc_fuzz::file("m.mtl", mtl);
     let path = mvpcc_fuzz::file("mesh.obj", obj);
     for allow_missing_materials in [false, true] {
-        let _ = read_mesh(&path, ReadOptions { allow_missing_materials });
+        let _ = read_mesh(
+            &path,
+            ReadOptions {
+                allow_missing_materials,
+            },
+        );
     }
 });

@@ -9,8 +9,9 @@ use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};
 use std::path::Path;
 
-/// Points read at a time.
-const BATCH: u64 = 1 << 20;
+/// Bytes of point records read at a time: a header may declare records of up to 64 KiB, so the
+/// batch is sized in bytes, not points.
+const BATCH_BYTES: u64 = 16 << 20;
 
 fn las_problem(e: las::Error) -> Problem {
     match e {
@@ -34,6 +35,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         offset: [t.x.offset, t.y.offset, t.z.offset],
     };
     let has_color = header.point_format().has_color;
+    let batch = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
     let mut positions = Vec::new();
     let mut colors16 = Vec::new();
     let mut intensity = Vec::new();
@@ -42,7 +44,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
-        let data = reader.read_points(BATCH).map_err(las_problem)?;
+        let data = reader.read_points(batch).map_err(las_problem)?;
         if data.is_empty() {
             break;
         }

@@ -27,11 +27,31 @@ fn to_rgb(data: &::gltf::image::Data) -> Option<RgbImage> {
     RgbImage::from_raw(data.width, data.height, pixels)
 }
 
+/// Refuses a GLB whose header claims more bytes than the file holds: the gltf crate allocates
+/// the claimed length (up to 4 GiB) before reading.
+fn check_glb_length(path: &Path) -> Result<(), String> {
+    use std::io::Read;
+    let mut header = [0u8; 12];
+    let mut file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let size = file.metadata().map_err(|e| e.to_string())?.len();
+    if file.read_exact(&mut header).is_err() || &header[..4] != b"glTF" {
+        return Ok(());
+    }
+    let declared = u32::from_le_bytes(header[8..12].try_into().expect("4 bytes"));
+    if u64::from(declared) > size {
+        return Err(format!(
+            "GLB header declares {declared} bytes but the file holds only {size}"
+        ));
+    }
+    Ok(())
+}
+
 pub fn read(path: &Path) -> Result<Mesh, MeshError> {
     let fail = |problem: String| MeshError::Read {
         path: path.to_path_buf(),
         problem,
     };
+    check_glb_length(path).map_err(fail)?;
     let (document, buffers, images) =
         ::gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
     let textures: Vec<Option<Arc<RgbImage>>> =

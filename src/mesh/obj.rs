@@ -8,6 +8,20 @@ use std::path::Path;
 
 const GREY: [f32; 3] = [0.6, 0.6, 0.6];
 
+/// An MTL file through tobj, after refusing what tobj would panic on: a colour line (`Ka`, `Kd`,
+/// `Ks`, `Ke`) with fewer than three values.
+fn load_mtl(path: &Path) -> tobj::MTLLoadResult {
+    let text = std::fs::read(path).map_err(|_| tobj::LoadError::OpenFileFailed)?;
+    let short_colour = String::from_utf8_lossy(&text).lines().any(|line| {
+        let mut words = line.split_whitespace();
+        matches!(words.next(), Some("Ka" | "Kd" | "Ks" | "Ke")) && words.count() < 3
+    });
+    if short_colour {
+        return Err(tobj::LoadError::MaterialParseError);
+    }
+    tobj::load_mtl_buf(&mut text.as_slice())
+}
+
 pub fn read(path: &Path, options: ReadOptions) -> Result<Mesh, MeshError> {
     let load = tobj::LoadOptions {
         triangulate: true,
@@ -15,14 +29,17 @@ pub fn read(path: &Path, options: ReadOptions) -> Result<Mesh, MeshError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) = tobj::load_obj(path, &load).map_err(|e| MeshError::Read {
-        path: path.to_path_buf(),
-        problem: match e {
-            tobj::LoadError::OpenFileFailed => "cannot open the file".to_string(),
-            other => format!("not a valid OBJ file ({other})"),
-        },
-    })?;
     let dir = path.parent().unwrap_or(Path::new("."));
+    let read_error = |problem: String| MeshError::Read {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let file = std::fs::File::open(path).map_err(|_| read_error("cannot open the file".into()))?;
+    let (models, materials) =
+        tobj::load_obj_buf(&mut std::io::BufReader::new(file), &load, |mtl| {
+            load_mtl(&dir.join(mtl))
+        })
+        .map_err(|e| read_error(format!("not a valid OBJ file ({e})")))?;
     let materials = match materials {
         Ok(m) => m,
         Err(e) if !options.allow_missing_materials => {

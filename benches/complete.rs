@@ -1,4 +1,4 @@
-//! `complete` end to end on a ~35K-point car scan (the README's speed table): read, orient and
+//! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient and
 //! complete with the built-in models, write; and the parts users can switch off.
 
 use criterion::{criterion_group, criterion_main, Criterion};

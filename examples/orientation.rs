@@ -1,4 +1,4 @@
-//! Measures the orientation stage (README, *Orientation*): every partial of a `prepare` test
+//! Measures the orientation stage (docs/orientation.md): every partial of a `prepare` test
 //! split is turned by a random yaw, the estimators' heading errors are collected, and the
 //! completion of the turned partial (`--orient auto`, turned back) is scored like `mvpcc eval
 //! --data` next to the completions of the partial as it is (`--orient none`, the pipeline

@@ -134,7 +134,7 @@ pub struct EvalArgs {
     #[arg(long, requires = "pred")]
     pub gt: Option<PathBuf>,
     /// Directory of predicted clouds, matched to --gt-dir by file stem, or to --data's test
-    /// samples as <category>/<model>/partial_<k>.*.
+    /// samples as CATEGORY/MODEL/partial_K.*.
     #[arg(long, conflicts_with = "pred_views")]
     pub pred_dir: Option<PathBuf>,
     /// A data directory from `mvpcc prepare`: score --pred-dir's completions of its test
@@ -435,8 +435,8 @@ impl ProfileArgs {
 
 #[derive(Debug, Args)]
 pub struct PrepareArgs {
-    /// Directory of meshes (OBJ+MTL, PLY, glTF/GLB), as DIR/<category>/<name>.* or ShapeNet's
-    /// DIR/<synset>/<id>/models/model_normalized.obj.
+    /// Directory of meshes (OBJ+MTL, PLY, glTF/GLB), as DIR/CATEGORY/NAME.* or ShapeNet's
+    /// DIR/SYNSET/ID/models/model_normalized.obj.
     #[arg(long, required_unless_present = "synth", conflicts_with = "synth")]
     pub meshes: Option<PathBuf>,
     /// Generate this many street objects into OUT/meshes first and prepare those.
@@ -510,7 +510,7 @@ pub struct SynthArgs {
     /// Number of objects.
     #[arg(long)]
     pub count: usize,
-    /// Output directory; objects go to OUT/<category>/<category>_NNNNN.obj.
+    /// Output directory; objects go to OUT/CATEGORY/CATEGORY_NNNNN.obj.
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
@@ -542,12 +542,12 @@ pub struct SynthOptions {
 /// interval, checkpoints kept).
 #[derive(Debug, Args)]
 pub struct TrainArgs {
-    /// Data: DIR/GT/train/<category>/<model>/ with DIR/in/train/<category>/<model>/<k>/; GT/test
+    /// Data: DIR/GT/train/CATEGORY/MODEL/ with DIR/in/train/CATEGORY/MODEL/K/; GT/test
     /// validates when present, else a share of the training models is held back.
     #[arg(long)]
     pub data: PathBuf,
     /// Run directory: checkpoints/, best/, generator.safetensors, log.jsonl, losses.png,
-    /// samples/ [default: runs/<name of the data directory>].
+    /// samples/ [default: runs/DATA, DATA the data directory's name].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Rig cameras the model sees [default: 5,6,7,8].
@@ -682,7 +682,7 @@ pub struct TrainOrientArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// Where orienter.safetensors, config.json, train-orient.json and log.jsonl go [default:
-    /// runs/orient-<name of the data directory>].
+    /// runs/orient-DATA, DATA the data directory's name].
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[arg(long, default_value_t = 4000)]

@@ -117,12 +117,14 @@ pub fn farthest_point_sample(points: &[[f64; 3]], n: usize) -> Vec<usize> {
     chosen
 }
 
+/// One grid cell: its box (lower and upper corner), the range of `order` it holds, and its
+/// farthest point as (squared distance, index).
+type FpsCell = ([f64; 3], [f64; 3], std::ops::Range<usize>, (f64, usize));
+
 /// Points sorted into grid cells, each point's squared distance to the nearest chosen centre,
 /// and each cell's farthest point.
 struct FpsGrid {
-    /// Per cell: its box (lower and upper corner), the range of `order` it holds, and its
-    /// farthest point as (squared distance, index).
-    cells: Vec<([f64; 3], [f64; 3], std::ops::Range<usize>, (f64, usize))>,
+    cells: Vec<FpsCell>,
     order: Vec<usize>,
     sorted: Vec<[f64; 3]>,
     nearest: Vec<f64>,

@@ -1,5 +1,5 @@
 //! Training data in the original dataset's layout ("shapenet-views"), made from meshes:
-//! [`discover`] finds and names the meshes, [`prepare`] turns one into ground truth, partial
+//! [`discover`] finds and names the meshes, [`prepare_model`] turns one into ground truth, partial
 //! samples and their view images, and [`Manifest`] records what was made and how.
 
 mod prepare;

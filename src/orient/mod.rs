@@ -86,7 +86,7 @@ pub struct Orientation {
     pub method: &'static str,
     /// Degrees the symmetry plane turned the estimator's heading (see [`refine_heading`]);
     /// `None` when the heading was given, the cloud showed no symmetry near it, or its flat
-    /// flanks kept the footprint axis (see [`FLAT_FLANKS`]).
+    /// flanks kept the footprint axis (see `FLAT_FLANKS`).
     pub refinement: Option<f64>,
 }
 

@@ -63,7 +63,7 @@ pub struct Synthesized {
     pub mesh: Mesh,
 }
 
-/// Object `index` of a run with `seed` over `categories` (weighted by [`Category::weight`]).
+/// Object `index` of a run with `seed` over `categories` (weighted by `Category::weight`).
 /// Depends only on these three, not on how many objects the run makes.
 pub fn synthesize(index: usize, seed: u64, categories: &[Category]) -> Synthesized {
     let object_seed = derive_seed(seed, &format!("synth/{index}"));

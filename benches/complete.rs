@@ -2,18 +2,15 @@
 //! complete with the built-in models, write; and the parts users can switch off.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::complete::{complete, Method, Options, DEFAULT_MODEL};
-use mvpcc::frame::UpAxis;
-use mvpcc::inpaint::Inpainter;
+use mvpcc::complete::{Completer, Method, Options, Settings};
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
-use mvpcc::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::orient::OrientMode;
 use std::time::Duration;
 
 mod common;
 
 fn end_to_end(c: &mut Criterion) {
-    let inpainter = Inpainter::from_bytes(DEFAULT_MODEL, burn::tensor::Device::flex()).unwrap();
-    let orienter = Orienter::from_bytes(DEFAULT_ORIENTER, burn::tensor::Device::flex()).unwrap();
+    let completer = Completer::builtin(burn::tensor::Device::flex()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("scan.ply");
     let output = dir.path().join("done.ply");
@@ -29,15 +26,16 @@ fn end_to_end(c: &mut Criterion) {
             group.bench_function(format!("{method:?}: read, orient, complete, write"), |b| {
                 b.iter(|| {
                     let cloud = read_cloud(&input, None).unwrap().cloud;
-                    let heading =
-                        orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
-                    let options = Options {
-                        method,
-                        heading,
-                        ..Options::default()
+                    let settings = Settings {
+                        clean: false,
+                        orient: OrientMode::Auto,
+                        options: Options {
+                            method,
+                            ..Options::default()
+                        },
                     };
-                    let done = complete(&cloud, Some(&inpainter), &options).unwrap();
-                    write_cloud(&output, &done.cloud, None, Encoding::Binary).unwrap();
+                    let run = completer.run(&cloud, &settings).unwrap();
+                    write_cloud(&output, &run.completion.cloud, None, Encoding::Binary).unwrap();
                 })
             });
         }

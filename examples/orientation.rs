@@ -13,7 +13,7 @@
 use burn::tensor::Device;
 use mvpcc::clean::clean;
 use mvpcc::cloud::PointCloud;
-use mvpcc::complete::{complete, Options, DEFAULT_MODEL};
+use mvpcc::complete::{Completer, Options, Settings, DEFAULT_MODEL};
 use mvpcc::data::{Layout, Manifest, TEST};
 use mvpcc::frame::{Frame, UpAxis};
 use mvpcc::inpaint::Inpainter;
@@ -102,11 +102,18 @@ fn clutter(cloud: &PointCloud, rng: &mut Lcg) -> (PointCloud, [usize; 3]) {
     )
 }
 
-fn options(heading: Option<f64>) -> Options {
-    Options {
-        heading,
-        ..Options::default()
-    }
+/// `cloud` completed with the default options and the heading `orient` finds.
+fn completed(
+    completer: &Completer,
+    cloud: &PointCloud,
+    orient: OrientMode,
+) -> Result<PointCloud, Error> {
+    let settings = Settings {
+        clean: false,
+        orient,
+        options: Options::default(),
+    };
+    Ok(completer.run(cloud, &settings)?.completion.cloud)
 }
 
 /// Heading of the object's front (−z in its ground truth's frame) in a partial's own frame:
@@ -143,8 +150,11 @@ fn main() -> Result<(), Error> {
         Some(p) => std::fs::read(p)?,
         None => DEFAULT_MODEL.to_vec(),
     };
-    let orienter = Orienter::from_bytes(&orienter_bytes, Device::flex())?;
-    let inpainter = Inpainter::from_bytes(&model_bytes, Device::flex())?;
+    let completer = Completer::new(
+        Some(Inpainter::from_bytes(&model_bytes, Device::flex())?),
+        Some(Orienter::from_bytes(&orienter_bytes, Device::flex())?),
+    );
+    let orienter = completer.orienter().expect("given above");
     let mut rng = Lcg::new(seed);
 
     let mut errors: BTreeMap<String, Vec<f64>> = BTreeMap::new();
@@ -171,7 +181,7 @@ fn main() -> Result<(), Error> {
                 PartialSpec::Scanner { .. } => "scanner",
             };
             for (name, mode) in MODES {
-                let found = orient(&rotated, UpAxis::Y, mode, Some(&orienter));
+                let found = orient(&rotated, UpAxis::Y, mode, Some(orienter));
                 let heading = found.heading.unwrap_or(f64::NAN);
                 let unrefined = heading - found.refinement.unwrap_or(0.0);
                 for (name, e) in [
@@ -213,22 +223,17 @@ fn main() -> Result<(), Error> {
                     quality.entry(key).or_default().push(value);
                 }
             };
-            let plain = complete(&cloud, Some(&inpainter), &options(None))?;
-            record("as is, --orient none", score(&plain.cloud));
+            let plain = completed(&completer, &cloud, OrientMode::None)?;
+            record("as is, --orient none", score(&plain));
             for (label, mode) in [("auto", OrientMode::Auto), ("learned", OrientMode::Learned)] {
-                let heading = orient(&cloud, UpAxis::Y, mode, Some(&orienter)).heading;
-                let done = complete(&cloud, Some(&inpainter), &options(heading))?;
-                record(&format!("as is, --orient {label}"), score(&done.cloud));
+                let done = completed(&completer, &cloud, mode)?;
+                record(&format!("as is, --orient {label}"), score(&done));
             }
-            let exact = complete(
-                &cloud,
-                Some(&inpainter),
-                &options(Some(heading_in_partial(&sample.spec))),
-            )?;
-            record("as is, the true heading", score(&exact.cloud));
-            let heading = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
-            let auto = complete(&rotated, Some(&inpainter), &options(heading))?;
-            let back = turned(&auto.cloud, -turn, pivot);
+            let truth = OrientMode::Heading(heading_in_partial(&sample.spec));
+            let exact = completed(&completer, &cloud, truth)?;
+            record("as is, the true heading", score(&exact));
+            let auto = completed(&completer, &rotated, OrientMode::Auto)?;
+            let back = turned(&auto, -turn, pivot);
             record("turned, --orient auto", score(&back));
         }
     }
@@ -257,8 +262,8 @@ fn main() -> Result<(), Error> {
         for path in &files {
             let cloud = read_cloud(path, None)?.cloud;
             let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-            let heading = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
-            let plain = complete(&cloud, Some(&inpainter), &options(heading))?;
+            let heading = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(orienter)).heading;
+            let plain = completed(&completer, &cloud, OrientMode::Auto)?;
             // The scans are only roughly in the canonical pose (heading 90°), so the turned
             // scans' headings are checked against the scan's own estimate, turned.
             let own = heading.unwrap_or(90.0);
@@ -270,15 +275,15 @@ fn main() -> Result<(), Error> {
             for _ in 0..5 {
                 let turn = rng.range(-180.0, 180.0);
                 let rotated = turned(&cloud, turn, pivot);
-                let found = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(&orienter)).heading;
+                let found = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(orienter)).heading;
                 let e = angle_between(found.unwrap_or(f64::NAN), own + turn);
                 mls_errors.push(e);
-                let done = complete(&rotated, Some(&inpainter), &options(found))?;
-                let back = turned(&done.cloud, -turn, pivot);
+                let done = completed(&completer, &rotated, OrientMode::Auto)?;
+                let back = turned(&done, -turn, pivot);
                 let frame = Frame::fit(&cloud, UpAxis::Y)?;
                 let m = compare_clouds(
                     &frame.normalize(&back).positions,
-                    &frame.normalize(&plain.cloud).positions,
+                    &frame.normalize(&plain).positions,
                     &[0.01],
                 );
                 println!(
@@ -287,7 +292,7 @@ fn main() -> Result<(), Error> {
                     m.cd_l2_half,
                     m.fscores[0].f1,
                     back.len(),
-                    plain.cloud.len()
+                    plain.len()
                 );
             }
         }
@@ -299,16 +304,16 @@ fn main() -> Result<(), Error> {
         for path in &files {
             let cloud = read_cloud(path, None)?.cloud;
             let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-            let own = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(&orienter))
+            let own = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(orienter))
                 .heading
                 .unwrap_or(90.0);
             for _ in 0..5 {
                 let turn = rng.range(-180.0, 180.0);
                 let rotated = turned(&cloud, turn, pivot);
                 let (cluttered, added) = clutter(&rotated, &mut rng);
-                let raw = orient(&cluttered, UpAxis::Y, OrientMode::Auto, Some(&orienter));
+                let raw = orient(&cluttered, UpAxis::Y, OrientMode::Auto, Some(orienter));
                 let (cleaned, report) = clean(&cluttered, UpAxis::Y);
-                let after = orient(&cleaned, UpAxis::Y, OrientMode::Auto, Some(&orienter));
+                let after = orient(&cleaned, UpAxis::Y, OrientMode::Auto, Some(orienter));
                 let (e_raw, e_clean) = [raw, after]
                     .map(|o| angle_between(o.heading.unwrap_or(f64::NAN), own + turn))
                     .into();

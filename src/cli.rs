@@ -169,6 +169,9 @@ pub struct EvalArgs {
     pub input: InputOptions,
 }
 
+/// The decoded-sample cache of `train` and `train-orient`, MiB.
+const DEFAULT_CACHE_MB: usize = 2048;
+
 /// Which ground truth `eval --data` scores against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -668,7 +671,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 4)]
     pub prefetch: usize,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
-    #[arg(long, default_value_t = 2048)]
+    #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
     pub cache_mb: usize,
     /// Print the run's summary as JSON on stdout.
     #[arg(long)]
@@ -703,4 +706,7 @@ pub struct TrainOrientArgs {
     pub seed: u64,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
+    /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
+    #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
+    pub cache_mb: usize,
 }

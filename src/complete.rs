@@ -9,14 +9,18 @@
 //! partial united with its mirror image across the vehicle's long vertical plane).
 
 use crate::camera::{Camera, CameraError};
+use crate::clean::{clean, CleanReport};
 use crate::cloud::{Attribute, PointCloud, ScalarKind};
 use crate::filter::{inliers, SorParams};
 use crate::frame::{Frame, FrameError, UpAxis};
 use crate::inpaint::{InpaintError, Inpainter};
 use crate::knn::KnnIndex;
+use crate::model::weights::WeightsError;
+use crate::orient::{orient, OrientMode, Orientation, Orienter, DEFAULT_ORIENTER};
 use crate::projection::{project, ViewImages};
 use crate::reprojection::{reproject, snap_to_rays, ReprojectOptions};
 use crate::symmetry::{find_plane, mirror, Plane};
+use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use serde::Serialize;
 use std::time::{Duration, Instant};
@@ -127,9 +131,13 @@ pub enum CompleteError {
     NoModel,
 }
 
-/// Wall time of each stage (the paper's Table 4 rows; reading and writing are the command's).
+/// Wall time of each stage (the paper's Table 4 rows, and ours). Reading and writing are
+/// measured by whoever does them (the command); the rest by [`Completer::run`] and [`complete`].
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Timings {
+    pub read: Duration,
+    pub clean: Duration,
+    pub orientation: Duration,
     /// Frame, symmetry plane and mirror images.
     pub symmetry: Duration,
     pub projection: Duration,
@@ -138,6 +146,118 @@ pub struct Timings {
     pub decoder: Duration,
     pub reprojection: Duration,
     pub filter: Duration,
+    pub write: Duration,
+}
+
+impl Timings {
+    /// Every stage with its name, in pipeline order (what `--timings` prints).
+    pub fn stages(&self) -> [(&'static str, Duration); 12] {
+        [
+            ("read", self.read),
+            ("clean", self.clean),
+            ("orientation", self.orientation),
+            ("symmetry", self.symmetry),
+            ("projection", self.projection),
+            ("encoder", self.encoder),
+            ("fusion", self.fusion),
+            ("decoder", self.decoder),
+            ("re-projection", self.reprojection),
+            ("filter", self.filter),
+            ("write", self.write),
+            ("total", self.total()),
+        ]
+    }
+
+    pub fn total(&self) -> Duration {
+        self.read
+            + self.clean
+            + self.orientation
+            + self.symmetry
+            + self.projection
+            + self.encoder
+            + self.fusion
+            + self.decoder
+            + self.reprojection
+            + self.filter
+            + self.write
+    }
+}
+
+/// What a [`Completer`] does around [`complete`]: whether it cleans the input first and how it
+/// finds the heading (which it then puts in `options.heading`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub clean: bool,
+    pub orient: OrientMode,
+    pub options: Options,
+}
+
+/// A whole completion run.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The cleaned input and what cleaning removed, when it ran.
+    pub cleaned: Option<(PointCloud, CleanReport)>,
+    pub orientation: Orientation,
+    pub completion: Completion,
+}
+
+/// The completion pipeline with its networks loaded once, for any number of clouds:
+/// clean → orient → frame → symmetry and mirror images → network → merge.
+pub struct Completer {
+    inpainter: Option<Inpainter>,
+    orienter: Option<Orienter>,
+}
+
+impl Completer {
+    /// `inpainter` is needed by the network method, `orienter` by the orientation modes that
+    /// run the orientation network.
+    pub fn new(inpainter: Option<Inpainter>, orienter: Option<Orienter>) -> Completer {
+        Completer {
+            inpainter,
+            orienter,
+        }
+    }
+
+    /// The built-in generator on `device` and the built-in orientation network (on the CPU,
+    /// where a network that small runs fastest).
+    pub fn builtin(device: Device) -> Result<Completer, WeightsError> {
+        Ok(Completer::new(
+            Some(Inpainter::from_bytes(DEFAULT_MODEL, device)?),
+            Some(Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())?),
+        ))
+    }
+
+    pub fn inpainter(&self) -> Option<&Inpainter> {
+        self.inpainter.as_ref()
+    }
+
+    pub fn orienter(&self) -> Option<&Orienter> {
+        self.orienter.as_ref()
+    }
+
+    /// Completes `cloud` as `settings` say.
+    pub fn run(&self, cloud: &PointCloud, settings: &Settings) -> Result<Run, CompleteError> {
+        let up = settings.options.up;
+        let start = Instant::now();
+        let cleaned = settings.clean.then(|| clean(cloud, up));
+        let clean_time = start.elapsed();
+        let input = cleaned.as_ref().map_or(cloud, |(c, _)| c);
+        let start = Instant::now();
+        let orientation = orient(input, up, settings.orient, self.orienter.as_ref());
+        let orient_time = start.elapsed();
+        let options = Options {
+            heading: orientation.heading,
+            ..settings.options.clone()
+        };
+        let mut completion = complete(input, self.inpainter.as_ref(), &options)?;
+        completion.timings.clean = clean_time;
+        completion.timings.orientation = orient_time;
+        Ok(Run {
+            cleaned,
+            orientation,
+            completion,
+        })
+    }
 }
 
 /// A completed cloud and what happened on the way.
@@ -184,34 +304,11 @@ pub fn complete(
         return Err(CompleteError::TooFewPoints(input.len()));
     }
     let symmetry_start = Instant::now();
-    let fitted = match options.heading {
-        Some(heading) => Frame::fit_heading(input, options.up, heading)?,
-        None => Frame::fit(input, options.up)?,
-    };
-    let fitted_points: Vec<[f64; 3]> = input
-        .positions
-        .iter()
-        .map(|&p| fitted.to_normalized(p))
-        .collect();
-    let wants_plane = options.symmetric_frame
-        || options.method == Method::Mirror
-        || (options.method == Method::Network && options.symmetry);
-    let plane = wants_plane.then(|| find_plane(&fitted_points)).flatten();
-    let frame = if options.symmetric_frame {
-        symmetric_frame(&fitted, &fitted_points, plane)
-    } else {
-        fitted.clone()
-    };
-    let measured: Vec<[f64; 3]> = input
-        .positions
-        .iter()
-        .map(|&p| frame.to_normalized(p))
-        .collect();
-    let plane = plane.map(|p| Plane {
-        offset: frame.to_normalized(fitted.to_input([p.offset, 0.0, 0.0]))[0],
-        tolerance: p.tolerance * fitted.extent / frame.extent,
-        ..p
-    });
+    let Framed {
+        frame,
+        measured,
+        plane,
+    } = framed(input, options)?;
     let mut warnings = distribution_warnings(&measured);
     let mut timings = Timings::default();
 
@@ -224,120 +321,38 @@ pub fn complete(
     if options.method == Method::Mirror && plane.is_none() {
         warnings.push("no symmetry plane found; nothing is mirrored".to_string());
     }
-    let pitch = match inpainter {
-        Some(i) => 1.0 / i.config().size as f64,
-        None => 1.0 / 64.0,
-    };
-    let tolerance = options.merge_pixels * pitch;
     let measured_index = KnnIndex::new(&measured);
-    let mut added: Vec<Added> = Vec::new();
-    if let Some(plane) = mirror_plane {
-        let images: Vec<[f64; 3]> = measured.iter().map(|&p| mirror(p, plane.offset)).collect();
-        for (i, (image, (_, d))) in images
-            .iter()
-            .zip(measured_index.nearest(&images))
-            .enumerate()
-        {
-            if d > plane.tolerance {
-                added.push(Added {
-                    position: *image,
-                    color: None,
-                    source: i,
-                });
-            }
-        }
-    }
+    let mut added = mirror_plane.map_or_else(Vec::new, |plane| {
+        mirror_images(&measured, &measured_index, plane)
+    });
     let mut mirrored = added.len();
     timings.symmetry = symmetry_start.elapsed();
 
     let mut filtered_out = 0;
-    let mut network_cloud: Option<Vec<[f64; 3]>> = None;
+    let mut keep_input = true;
     let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
-        let config = inpainter.config();
-        if config.views != options.views.len() {
-            return Err(CompleteError::Views {
-                model: config.views,
-                given: options.views.len(),
-            });
-        }
-        let start = Instant::now();
-        let cameras = Camera::set(&options.views, config.size)?;
-        let points: Vec<[f32; 3]> = measured.iter().map(|p| p.map(|c| c as f32)).collect();
-        let batch = [project(&points, input.colors.as_deref(), &cameras)];
-        timings.projection = start.elapsed();
-
-        let (mut out, stages) = inpainter.inpaint_timed(&batch)?;
-        timings.encoder = stages.encoder;
-        timings.fusion = stages.fusion;
-        timings.decoder = stages.decoder;
-
-        let start = Instant::now();
-        let mut inpainted = out.pop().expect("one object in, one out");
-        if options.keep_views {
-            let [input] = batch;
-            views = Some(NetworkViews {
-                input,
-                output: inpainted.clone(),
-            });
-        }
-        if options.snap {
-            snap_to_rays(&mut inpainted, &cameras);
-        }
-        let predicted = reproject(
-            &inpainted,
-            ReprojectOptions {
-                erode: options.erode,
-                smooth: options.smooth,
-                ..ReprojectOptions::default()
-            },
-        );
-        timings.reprojection = start.elapsed();
-
-        let start = Instant::now();
-        let keep = inliers(&predicted.positions, options.sor);
-        filtered_out = keep.iter().filter(|&&k| !k).count();
-        let predicted = predicted.filter(&keep);
-        timings.filter = start.elapsed();
-
+        let network = run_network(input, &measured, inpainter, options, &mut timings)?;
+        filtered_out = network.filtered_out;
+        views = network.views;
         let start = Instant::now();
         if options.keep_input {
-            // Covered: measured points and the mirror images already added.
-            let mut covered = measured.clone();
-            covered.extend(added.iter().map(|a| a.position));
-            let covered_index = KnnIndex::new(&covered);
-            let near = covered_index.nearest(&predicted.positions);
-            let measured_near = measured_index.nearest(&predicted.positions);
-            for (i, ((_, d), (source, _))) in near.into_iter().zip(measured_near).enumerate() {
-                if d > tolerance {
-                    added.push(Added {
-                        position: predicted.positions[i],
-                        color: predicted.colors.as_ref().map(|c| c[i]),
-                        source,
-                    });
-                }
-            }
+            let tolerance = options.merge_pixels / inpainter.config().size as f64;
+            let covered = covered_by(&measured, &added, &network.predicted, tolerance);
+            added.extend(network_points(
+                &network.predicted,
+                &measured_index,
+                Some(&covered),
+            ));
         } else {
-            network_cloud = Some(predicted.positions.clone());
+            keep_input = false;
             mirrored = 0;
-            let sources = measured_index.nearest(&predicted.positions);
-            added = predicted
-                .positions
-                .iter()
-                .zip(sources)
-                .enumerate()
-                .map(|(i, (&position, (source, _)))| Added {
-                    position,
-                    color: predicted.colors.as_ref().map(|c| c[i]),
-                    source,
-                })
-                .collect();
+            added = network_points(&network.predicted, &measured_index, None);
         }
         timings.reprojection += start.elapsed();
     }
 
-    let keep_input = network_cloud.is_none();
     let cloud = assemble(input, &frame, &added, keep_input);
     let mut normalized = if keep_input {
         measured.clone()
@@ -359,6 +374,174 @@ pub fn complete(
         timings,
         views,
     })
+}
+
+/// The network's frame for an input, the measured points in it, and the symmetry plane.
+struct Framed {
+    frame: Frame,
+    measured: Vec<[f64; 3]>,
+    plane: Option<Plane>,
+}
+
+/// Fits the frame (in the heading's pose), finds the symmetry plane when anything needs it, and
+/// refits the frame around the plane when `symmetric_frame` asks.
+fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError> {
+    let fitted = match options.heading {
+        Some(heading) => Frame::fit_heading(input, options.up, heading)?,
+        None => Frame::fit(input, options.up)?,
+    };
+    let fitted_points: Vec<[f64; 3]> = input
+        .positions
+        .iter()
+        .map(|&p| fitted.to_normalized(p))
+        .collect();
+    let wants_plane = options.symmetric_frame
+        || options.method == Method::Mirror
+        || (options.method == Method::Network && options.symmetry);
+    let plane = wants_plane.then(|| find_plane(&fitted_points)).flatten();
+    let frame = if options.symmetric_frame {
+        symmetric_frame(&fitted, &fitted_points, plane)
+    } else {
+        fitted.clone()
+    };
+    let measured = input
+        .positions
+        .iter()
+        .map(|&p| frame.to_normalized(p))
+        .collect();
+    let plane = plane.map(|p| Plane {
+        offset: frame.to_normalized(fitted.to_input([p.offset, 0.0, 0.0]))[0],
+        tolerance: p.tolerance * fitted.extent / frame.extent,
+        ..p
+    });
+    Ok(Framed {
+        frame,
+        measured,
+        plane,
+    })
+}
+
+/// Mirror images of the measured points across `plane`, where no measured point lies within
+/// the plane's tolerance.
+fn mirror_images(measured: &[[f64; 3]], index: &KnnIndex, plane: Plane) -> Vec<Added> {
+    let images: Vec<[f64; 3]> = measured.iter().map(|&p| mirror(p, plane.offset)).collect();
+    images
+        .iter()
+        .zip(index.nearest(&images))
+        .enumerate()
+        .filter(|(_, (_, (_, d)))| *d > plane.tolerance)
+        .map(|(i, (image, _))| Added {
+            position: *image,
+            color: None,
+            source: i,
+        })
+        .collect()
+}
+
+/// What the network made of one object, re-projected and filtered.
+struct NetworkOutput {
+    predicted: PointCloud,
+    filtered_out: usize,
+    views: Option<NetworkViews>,
+}
+
+/// Projection, inpainting, snapping, re-projection and the outlier filter, timed.
+fn run_network(
+    input: &PointCloud,
+    measured: &[[f64; 3]],
+    inpainter: &Inpainter,
+    options: &Options,
+    timings: &mut Timings,
+) -> Result<NetworkOutput, CompleteError> {
+    let config = inpainter.config();
+    if config.views != options.views.len() {
+        return Err(CompleteError::Views {
+            model: config.views,
+            given: options.views.len(),
+        });
+    }
+    let start = Instant::now();
+    let cameras = Camera::set(&options.views, config.size)?;
+    let points: Vec<[f32; 3]> = measured.iter().map(|p| p.map(|c| c as f32)).collect();
+    let batch = [project(&points, input.colors.as_deref(), &cameras)];
+    timings.projection = start.elapsed();
+
+    let (mut out, stages) = inpainter.inpaint_timed(&batch)?;
+    timings.encoder = stages.encoder;
+    timings.fusion = stages.fusion;
+    timings.decoder = stages.decoder;
+
+    let start = Instant::now();
+    let mut inpainted = out.pop().expect("one object in, one out");
+    let views = options.keep_views.then(|| {
+        let [input] = batch;
+        NetworkViews {
+            input,
+            output: inpainted.clone(),
+        }
+    });
+    if options.snap {
+        snap_to_rays(&mut inpainted, &cameras);
+    }
+    let predicted = reproject(
+        &inpainted,
+        ReprojectOptions {
+            erode: options.erode,
+            smooth: options.smooth,
+            ..ReprojectOptions::default()
+        },
+    );
+    timings.reprojection = start.elapsed();
+
+    let start = Instant::now();
+    let keep = inliers(&predicted.positions, options.sor);
+    let filtered_out = keep.iter().filter(|&&k| !k).count();
+    let predicted = predicted.filter(&keep);
+    timings.filter = start.elapsed();
+    Ok(NetworkOutput {
+        predicted,
+        filtered_out,
+        views,
+    })
+}
+
+/// Per network point, whether a measured point or an added mirror image lies within
+/// `tolerance` of it.
+fn covered_by(
+    measured: &[[f64; 3]],
+    added: &[Added],
+    predicted: &PointCloud,
+    tolerance: f64,
+) -> Vec<bool> {
+    let mut covered = measured.to_vec();
+    covered.extend(added.iter().map(|a| a.position));
+    KnnIndex::new(&covered)
+        .nearest(&predicted.positions)
+        .into_iter()
+        .map(|(_, d)| d <= tolerance)
+        .collect()
+}
+
+/// The network's points (those not `covered`, when given), each taking its attributes from
+/// its nearest measured point.
+fn network_points(
+    predicted: &PointCloud,
+    measured_index: &KnnIndex,
+    covered: Option<&[bool]>,
+) -> Vec<Added> {
+    let sources = measured_index.nearest(&predicted.positions);
+    predicted
+        .positions
+        .iter()
+        .zip(sources)
+        .enumerate()
+        .filter(|(i, _)| !covered.is_some_and(|c| c[*i]))
+        .map(|(i, (&position, (source, _)))| Added {
+            position,
+            color: predicted.colors.as_ref().map(|c| c[i]),
+            source,
+        })
+        .collect()
 }
 
 /// A completed point in the network's frame; `source` is the measured point it takes its

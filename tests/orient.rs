@@ -3,9 +3,12 @@
 //! did, and `train-orient` writes weights `complete` can use.
 
 use assert_cmd::Command;
+use burn::tensor::Device;
 use mvpcc::cloud::{PointCloud, SYNTHETIC};
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
 use mvpcc::orient::angle_between;
+use mvpcc::orient::train::{train_orienter, OrientData, OrientSettings, OrientTrainError};
+use mvpcc::orient::OrienterConfig;
 use predicates::prelude::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -307,6 +310,30 @@ fn train_orient_writes_weights_that_complete_reads() {
     }
     let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
     assert_eq!(log.lines().count(), 4);
+    // A step that cannot be recorded stops the run with the recorder's error.
+    let samples = OrientData::scan(&data).unwrap();
+    let settings = OrientSettings {
+        steps: 4,
+        batch: 2,
+        ..OrientSettings::default()
+    };
+    let config = OrienterConfig::new().with_points(64);
+    let failed = train_orienter(
+        &samples,
+        &config,
+        &settings,
+        &Device::flex(),
+        1 << 20,
+        |r| match r.step {
+            2 => Err(std::io::Error::other("disk full")),
+            _ => Ok(()),
+        },
+    );
+    assert!(
+        matches!(failed, Err(OrientTrainError::Monitor { step: 2, .. })),
+        "{:?}",
+        failed.err()
+    );
     let input = dir.path().join("scan.ply");
     let cloud = read_cloud(
         &std::fs::read_dir(data.join("clouds/test"))

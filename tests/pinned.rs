@@ -64,8 +64,7 @@ fn complete_gives_the_pinned_outputs() {
             .find(|l| l.split(' ').next() == Some(name))
             .unwrap_or_else(|| panic!("{name} is not pinned in {}", pinned_path.display()));
         assert_eq!(
-            line,
-            expected,
+            line, expected,
             "complete's output for {name} changed (hash, bytes)"
         );
     }

@@ -1,16 +1,18 @@
 use super::project::default_up;
 use super::{load, progress, Log};
 use crate::batch::{self, read_list, walk};
-use crate::clean::{clean, CleanReport};
+use crate::clean::CleanReport;
 use crate::cli::CompleteArgs;
 use crate::cloud::PointCloud;
-use crate::complete::{complete, Completion, Method, Options, DEFAULT_MODEL, SYNTHETIC};
+use crate::complete::{
+    Completer, Completion, Method, Options, Run, Settings, Timings, DEFAULT_MODEL, SYNTHETIC,
+};
 use crate::device::{open, DeviceChoice};
 use crate::filter::SorParams;
 use crate::frame::UpAxis;
 use crate::inpaint::Inpainter;
 use crate::io::{atomic_write, check_output, write_cloud, Format};
-use crate::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use crate::orient::{OrientMode, Orienter, DEFAULT_ORIENTER};
 use crate::preview::{render, Layer};
 use crate::views::write_views;
 use anyhow::{anyhow, bail, Context};
@@ -22,12 +24,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-/// The networks a run needs, loaded once for all its files.
-struct Models {
-    inpainter: Option<Inpainter>,
-    orienter: Option<Orienter>,
-}
-
 pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     let inpainter = match args.method {
         Method::Network => Some(load_model(args.model.as_deref(), args.device, log)?),
@@ -38,20 +34,17 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     } else {
         None
     };
-    let models = Models {
-        inpainter,
-        orienter,
-    };
+    let completer = Completer::new(inpainter, orienter);
     match (&args.input, &args.output, &args.input_dir, &args.output_dir) {
         (Some(input), Some(output), _, _) => {
             let views = args.save_views.clone();
-            let report = complete_file(input, output, views, &args, &models, log)?;
+            let report = complete_file(input, output, views, &args, &completer, log)?;
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             }
             Ok(())
         }
-        (None, None, _, Some(_)) => batch(&args, &models, log),
+        (None, None, _, Some(_)) => batch(&args, &completer, log),
         _ => bail!("give IN and OUT, or --input-dir (or --list) and --output-dir"),
     }
 }
@@ -113,31 +106,39 @@ fn up_axis(args: &CompleteArgs, input: &Path) -> UpAxis {
         .unwrap_or_else(|| default_up(input, args.input_options.format))
 }
 
-fn options(args: &CompleteArgs, input: &Path, heading: Option<f64>) -> Options {
+/// What the options ask of the pipeline for `input`.
+fn settings(args: &CompleteArgs, input: &Path) -> Settings {
+    Settings {
+        clean: args.clean,
+        orient: orient_mode(args),
+        options: options(args, input),
+    }
+}
+
+fn options(args: &CompleteArgs, input: &Path) -> Options {
+    let up = up_axis(args, input);
+    let sor = SorParams {
+        k: args.sor.sor_k,
+        std_mul: args.sor.sor_std,
+    };
     if args.paper {
         return Options {
             views: args.views.0.clone(),
             erode: args.erode,
-            sor: SorParams {
-                k: args.sor.sor_k,
-                std_mul: args.sor.sor_std,
-            },
+            sor,
             keep_views: args.save_views.is_some(),
-            ..Options::paper(up_axis(args, input), heading)
+            ..Options::paper(up, None)
         };
     }
     Options {
         method: args.method,
-        up: up_axis(args, input),
-        heading,
+        up,
+        heading: None,
         views: args.views.0.clone(),
         erode: args.erode,
         smooth: args.smooth,
         snap: !args.no_snap,
-        sor: SorParams {
-            k: args.sor.sor_k,
-            std_mul: args.sor.sor_std,
-        },
+        sor,
         keep_input: !args.no_keep_input,
         merge_pixels: args.merge_pixels,
         symmetry: !args.no_symmetry,
@@ -199,19 +200,18 @@ fn complete_file(
     output: &Path,
     views: Option<PathBuf>,
     args: &CompleteArgs,
-    models: &Models,
+    completer: &Completer,
     log: Log,
 ) -> anyhow::Result<FileReport> {
-    let total = Instant::now();
     check_output(output, &[input])?;
     let format = output_format(args, input, output)?;
     let start = Instant::now();
     let cloud = load(input, args.input_options.format, log)?;
     let read = start.elapsed();
-    let up = up_axis(args, input);
-    let start = Instant::now();
-    let (cloud, cleaned) = if args.clean {
-        let (cleaned, report) = clean(&cloud, up);
+    let run = completer
+        .run(&cloud, &settings(args, input))
+        .map_err(|e| anyhow!("{}: {e}", input.display()))?;
+    if let Some((_, report)) = &run.cleaned {
         log.info(format!(
             "{}: --clean removed {} ground, {} isolated and {} other-object points",
             input.display(),
@@ -219,20 +219,8 @@ fn complete_file(
             report.isolated,
             report.other_objects
         ));
-        (cleaned, Some(report))
-    } else {
-        (cloud, None)
-    };
-    let cleaning = start.elapsed();
-    let start = Instant::now();
-    let orientation = orient(&cloud, up, orient_mode(args), models.orienter.as_ref());
-    let orienting = start.elapsed();
-    let done = complete(
-        &cloud,
-        models.inpainter.as_ref(),
-        &options(args, input, orientation.heading),
-    )
-    .map_err(|e| anyhow!("{}: {e}", input.display()))?;
+    }
+    let done = &run.completion;
     for w in &done.warnings {
         log.warn(format!("{}: {w}", input.display()));
     }
@@ -243,14 +231,18 @@ fn complete_file(
         Some(format),
         args.output_options.encoding,
     )?;
-    let write = start.elapsed();
+    let timings = Timings {
+        read,
+        write: start.elapsed(),
+        ..done.timings
+    };
     if let Some(path) = &args.preview {
-        write_preview(path, &cloud, &done)?;
+        let measured = run.cleaned.as_ref().map_or(&cloud, |(c, _)| c);
+        write_preview(path, measured, done)?;
     }
     if let Some(dir) = &views {
-        save_views(dir, input, &done, log)?;
+        save_views(dir, input, done, log)?;
     }
-    let total = total.elapsed();
     log.info(format!(
         "{}: {} points → {} ({} completed{}{}) in {:.2} s",
         output.display(),
@@ -262,37 +254,24 @@ fn complete_file(
         } else {
             String::new()
         },
-        orientation.heading.map_or(String::new(), |h| format!(
+        run.orientation.heading.map_or(String::new(), |h| format!(
             "; heading {h:.1}° ({})",
-            orientation.method
+            run.orientation.method
         )),
-        total.as_secs_f64()
+        timings.total().as_secs_f64()
     ));
-    let t = &done.timings;
-    let rows = [
-        ("read", read),
-        ("clean", cleaning),
-        ("orientation", orienting),
-        ("symmetry", t.symmetry),
-        ("projection", t.projection),
-        ("encoder", t.encoder),
-        ("fusion", t.fusion),
-        ("decoder", t.decoder),
-        ("re-projection", t.reprojection),
-        ("filter", t.filter),
-        ("write", write),
-        ("total", total),
-    ];
     if args.timings && !args.json {
-        for (name, d) in rows {
+        for (name, d) in timings.stages() {
             eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
         }
     }
-    let seconds = rows
-        .iter()
-        .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
-        .collect();
-    Ok(FileReport {
+    Ok(report(input, output, args, run, &timings))
+}
+
+/// The `--json` report of one completed file.
+fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timings) -> FileReport {
+    let done = run.completion;
+    FileReport {
         input: input.to_path_buf(),
         output: output.to_path_buf(),
         method: args.method,
@@ -306,14 +285,18 @@ fn complete_file(
             support: p.support,
         }),
         orientation: OrientationReport {
-            heading: orientation.heading,
-            method: orientation.method,
-            refinement: orientation.refinement,
+            heading: run.orientation.heading,
+            method: run.orientation.method,
+            refinement: run.orientation.refinement,
         },
-        cleaned,
+        cleaned: run.cleaned.map(|(_, report)| report),
         warnings: done.warnings,
-        seconds,
-    })
+        seconds: t
+            .stages()
+            .iter()
+            .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
+            .collect(),
+    }
 }
 
 /// The network's views as `DIR/input/` and `DIR/output/`; said so when the method ran none.
@@ -452,7 +435,7 @@ fn batch_entry(
     relative: &Path,
     output_dir: &Path,
     args: &CompleteArgs,
-    models: &Models,
+    completer: &Completer,
 ) -> BatchEntry {
     let input = root.join(relative);
     let output = batch_output(output_dir, relative, args);
@@ -470,7 +453,7 @@ fn batch_entry(
                 .save_views
                 .as_ref()
                 .map(|d| d.join(relative.with_extension("")));
-            complete_file(&input, &output, views, args, models, quiet)
+            complete_file(&input, &output, views, args, completer, quiet)
         });
     match result {
         Ok(report) => BatchEntry::Completed(report),
@@ -481,7 +464,7 @@ fn batch_entry(
     }
 }
 
-fn batch(args: &CompleteArgs, models: &Models, log: Log) -> anyhow::Result<()> {
+fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result<()> {
     let output_dir = args.output_dir.as_deref().expect("clap requires it");
     let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
     let files = batch_files(&root, args)?;
@@ -498,7 +481,7 @@ fn batch(args: &CompleteArgs, models: &Models, log: Log) -> anyhow::Result<()> {
                 let Some(relative) = files.get(i) else {
                     break;
                 };
-                let entry = batch_entry(&root, relative, output_dir, args, models);
+                let entry = batch_entry(&root, relative, output_dir, args, completer);
                 results.lock().expect("no worker panics").push((i, entry));
                 bar.inc(1);
             });
@@ -580,10 +563,7 @@ mod tests {
         let Command::Complete(args) = cli.command else {
             panic!("parsed as another command");
         };
-        assert_eq!(
-            options(&args, Path::new("in.ply"), None),
-            Options::default()
-        );
+        assert_eq!(options(&args, Path::new("in.ply")), Options::default());
     }
 
     #[test]

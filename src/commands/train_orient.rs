@@ -5,7 +5,7 @@ use super::Log;
 use crate::cli::TrainOrientArgs;
 use crate::device::open;
 use crate::io::atomic_write;
-use crate::orient::train::{train_orienter, OrientData, OrientSettings};
+use crate::orient::train::{train_orienter, OrientData, OrientSettings, OrientTrainError};
 use crate::orient::OrienterConfig;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -72,31 +72,37 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
             .expect("a valid progress template"),
     );
     let mut smoothed = None;
-    let (orienter, scores) = train_orienter(&data, &config, &settings, &opened.device, |record| {
-        let loss = f64::from(record.loss);
-        let s = smoothed.map_or(loss, |s: f64| 0.98 * s + 0.02 * loss);
-        smoothed = Some(s);
-        bar.set_position(record.step);
-        if let Some(v) = &record.validation {
-            bar.set_message(format!(
-                "loss {s:.4}  val median {:.1}° p95 {:.1}° flips {:.1} %",
-                v.median,
-                v.p95,
-                100.0 * v.flips
-            ));
-            bar.println(format!(
-                "step {}: validation median {:.2}°, p95 {:.2}°, flips {:.2} %",
-                record.step,
-                v.median,
-                v.p95,
-                100.0 * v.flips
-            ));
-        }
-        serde_json::to_string(record)
-            .ok()
-            .and_then(|line| writeln!(log_file, "{line}").ok())
-            .is_some()
-    })?;
+    let cache = args.cache_mb << 20;
+    let (orienter, scores) =
+        train_orienter(&data, &config, &settings, &opened.device, cache, |record| {
+            let loss = f64::from(record.loss);
+            let s = smoothed.map_or(loss, |s: f64| 0.98 * s + 0.02 * loss);
+            smoothed = Some(s);
+            bar.set_position(record.step);
+            if let Some(v) = &record.validation {
+                bar.set_message(format!(
+                    "loss {s:.4}  val median {:.1}° p95 {:.1}° flips {:.1} %",
+                    v.median,
+                    v.p95,
+                    100.0 * v.flips
+                ));
+                bar.println(format!(
+                    "step {}: validation median {:.2}°, p95 {:.2}°, flips {:.2} %",
+                    record.step,
+                    v.median,
+                    v.p95,
+                    100.0 * v.flips
+                ));
+            }
+            let line = serde_json::to_string(record).map_err(std::io::Error::other)?;
+            writeln!(log_file, "{line}")
+        })
+        .map_err(|e| match e {
+            OrientTrainError::Monitor { .. } => {
+                anyhow::Error::new(e).context(log_path.display().to_string())
+            }
+            e => e.into(),
+        })?;
     bar.finish_and_clear();
     let weights = out.join(WEIGHTS_FILE);
     write_file(&weights, &orienter.to_bytes()?)?;

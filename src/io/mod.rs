@@ -64,7 +64,7 @@ pub enum Problem {
     NoPoints,
     #[error("all {0} points have NaN or infinite coordinates")]
     AllNonFinite(usize),
-    #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt or csv; or pass --format)")]
+    #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt, csv or pts; or pass --format)")]
     UnsupportedExtension(String),
     #[error("header declares {declared} points but the file holds only {found}")]
     Truncated { declared: usize, found: usize },
@@ -256,16 +256,18 @@ where
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),
 /// created with the permissions of an ordinary new file rather than tempfile's private 0600.
 fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
-    use std::os::unix::fs::PermissionsExt;
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    tempfile::Builder::new()
-        .prefix(".mvpcc-")
-        .suffix(".tmp")
-        .permissions(std::fs::Permissions::from_mode(0o666))
-        .tempfile_in(dir)
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".mvpcc-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder.tempfile_in(dir)
 }
 
 /// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.
@@ -425,6 +427,7 @@ mod tests {
         ));
     }
 
+    #[cfg(unix)]
     #[test]
     fn outputs_get_ordinary_file_permissions() {
         use std::os::unix::fs::PermissionsExt;

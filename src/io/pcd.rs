@@ -47,7 +47,9 @@ impl Field {
             Some(ScalarKind::I32) => i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
             Some(ScalarKind::U32) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
             Some(ScalarKind::F32) => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
-            Some(ScalarKind::F64) => f64::from_le_bytes(b[..8].try_into().unwrap()),
+            Some(ScalarKind::F64) => {
+                f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
+            }
             None => f64::NAN,
         }
     }
@@ -215,7 +217,13 @@ struct Collector {
 
 impl Collector {
     fn new(header: &Header) -> Collector {
-        let find = |name: &str| header.fields.iter().position(|f| f.name == name).unwrap();
+        let find = |name: &str| {
+            header
+                .fields
+                .iter()
+                .position(|f| f.name == name)
+                .expect("the header parser requires x, y and z")
+        };
         let color = header.fields.iter().position(Field::is_color);
         let attributes: Vec<usize> = (0..header.fields.len())
             .filter(|&i| {
@@ -237,7 +245,9 @@ impl Collector {
                     .iter()
                     .map(|&i| Attribute {
                         name: header.fields[i].name.clone(),
-                        kind: header.fields[i].scalar_kind().unwrap(),
+                        kind: header.fields[i]
+                            .scalar_kind()
+                            .expect("the header parser accepts only known scalar kinds"),
                         values: Vec::with_capacity(cap),
                     })
                     .collect(),
@@ -294,7 +304,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
                 collector.push(
                     fields,
                     |i| fields[i].value(&rec[offsets[i]..]),
-                    |i| u32::from_le_bytes(rec[offsets[i]..offsets[i] + 4].try_into().unwrap()),
+                    |i| le_u32(&rec[offsets[i]..]),
                 );
             }
         }
@@ -307,7 +317,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
                 collector.push(
                     fields,
                     |i| fields[i].value(&columns[at(i)..]),
-                    |i| u32::from_le_bytes(columns[at(i)..at(i) + 4].try_into().unwrap()),
+                    |i| le_u32(&columns[at(i)..]),
                 );
             }
         }
@@ -319,14 +329,19 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
 /// block expands more than this: a larger claim is refused before anything is allocated for it.
 const LZF_MAX_EXPANSION: usize = 89;
 
+/// The little-endian u32 `bytes` starts with (callers slice at least four bytes).
+fn le_u32(bytes: &[u8]) -> u32 {
+    u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]])
+}
+
 fn decompress(body: &[u8], points: usize, record: usize) -> Result<Vec<u8>, Problem> {
     if body.len() < 8 {
         return Err(malformed(
             "binary_compressed body is shorter than its 8-byte size prefix",
         ));
     }
-    let compressed = u32::from_le_bytes(body[0..4].try_into().unwrap()) as usize;
-    let uncompressed = u32::from_le_bytes(body[4..8].try_into().unwrap()) as usize;
+    let compressed = le_u32(body) as usize;
+    let uncompressed = le_u32(&body[4..]) as usize;
     let expected = points.saturating_mul(record);
     if uncompressed != expected {
         return Err(malformed(format!(

@@ -109,22 +109,13 @@ pub fn orient(
         OrientMode::Heading(h) => fixed(Some(h), "given"),
         mode => {
             let points = upright_points(cloud, up);
-            let learned = || orienter.map(|o| o.heading(&points));
-            let estimate = match mode {
-                OrientMode::Geometric => geometric(&points),
-                OrientMode::Learned => learned().or_else(|| geometric(&points)),
-                _ => match (footprint_axis(&points), learned()) {
-                    (Some(axis), Some(learned)) => Some(toward(axis, learned)),
-                    (axis, learned) => learned.or(axis.and_then(|_| geometric(&points))),
-                },
-            }
-            .unwrap_or(90.0);
-            let method = match mode {
-                OrientMode::Geometric => "geometric",
-                OrientMode::Learned => "learned",
-                _ => "combined",
+            let (estimate, method) = estimate(mode, &points, orienter);
+            // The flat-flank rule is about the footprint's axis; 90° by default counts as one.
+            let from_footprint = match method {
+                "geometric" | "combined" => true,
+                "learned" => false,
+                _ => mode != OrientMode::Learned,
             };
-            let from_footprint = mode != OrientMode::Learned;
             let refined = if from_footprint && flank_share(&points, estimate) >= FLAT_FLANKS {
                 None
             } else {
@@ -137,6 +128,29 @@ pub fn orient(
             }
         }
     }
+}
+
+/// The heading `mode` estimates and the estimator that gave it, as it happened: without an
+/// orientation network the learned and combined modes fall back to the footprint (reported as
+/// `geometric`), and a cloud no estimator can read gets 90° (reported as `default`).
+fn estimate(
+    mode: OrientMode,
+    points: &[[f64; 3]],
+    orienter: Option<&Orienter>,
+) -> (f64, &'static str) {
+    let learned = || orienter.map(|o| o.heading(points));
+    let footprint = || geometric(points).map(|h| (h, "geometric"));
+    let found = match mode {
+        OrientMode::Geometric => footprint(),
+        OrientMode::Learned => learned().map(|h| (h, "learned")).or_else(footprint),
+        _ => match (footprint_axis(points), learned()) {
+            (Some(axis), Some(learned)) => Some((toward(axis, learned), "combined")),
+            (None, Some(learned)) => Some((learned, "learned")),
+            (Some(_), None) => footprint(),
+            (None, None) => None,
+        },
+    };
+    found.unwrap_or((90.0, "default"))
 }
 
 /// The turn from heading `a` to heading `b`, in (−180°, 180°].
@@ -398,6 +412,27 @@ pub(crate) mod tests {
                 "found {found} for heading {heading}"
             );
         }
+    }
+
+    #[test]
+    fn the_reported_method_is_the_estimator_that_ran() {
+        let cloud = PointCloud::from_positions(car_block(37.0, [0.0; 3]));
+        // No orientation network: the learned and combined modes fall back to the footprint.
+        for mode in [
+            OrientMode::Learned,
+            OrientMode::Combined,
+            OrientMode::Geometric,
+        ] {
+            assert_eq!(orient(&cloud, UpAxis::Y, mode, None).method, "geometric");
+        }
+        // Nothing to read a heading from: 90°, said so.
+        let found = orient(
+            &PointCloud::default(),
+            UpAxis::Y,
+            OrientMode::Geometric,
+            None,
+        );
+        assert_eq!((found.heading, found.method), (Some(90.0), "default"));
     }
 
     #[test]

@@ -20,6 +20,9 @@ pub enum OrientTrainError {
     Data(#[from] DataError),
     #[error("{}: no validation samples: no test split and too few models to hold back", .0.display())]
     NoValidation(PathBuf),
+    /// The monitor could not record a step (its log cannot be written): the run stops.
+    #[error("cannot record step {step}: {source}")]
+    Monitor { step: u64, source: std::io::Error },
 }
 
 /// What shapes a run; saved beside the weights as `train-orient.json`.
@@ -139,17 +142,19 @@ impl OrientData {
     }
 }
 
-/// Trains an orientation network; `monitor` sees each logged step and may stop the run by
-/// returning false. Returns the network with the best validation median.
+/// Trains an orientation network, decoding samples into a cache of `cache_bytes`; `monitor`
+/// records each step, and an error from it stops the run with that error. Returns the network
+/// with the best validation median.
 pub fn train_orienter(
     data: &OrientData,
     config: &OrienterConfig,
     settings: &OrientSettings,
     device: &Device,
-    mut monitor: impl FnMut(&OrientRecord) -> bool,
+    cache_bytes: usize,
+    mut monitor: impl FnMut(&OrientRecord) -> std::io::Result<()>,
 ) -> Result<(Orienter, OrientScores), OrientTrainError> {
     let (train, validation) = (&data.train, &data.validation);
-    let cache = Arc::new(Cache::new(4 << 30));
+    let cache = Arc::new(Cache::new(cache_bytes));
     let load = |s: &SampleRef| -> Result<Vec<[f64; 3]>, DataError> {
         Ok(cache.get(&s.input, &settings.views)?.points())
     };
@@ -225,13 +230,12 @@ pub fn train_orienter(
                 best = Some((net.clone(), scores));
             }
         }
-        if !monitor(&OrientRecord {
+        monitor(&OrientRecord {
             step,
             loss: value,
             validation,
-        }) {
-            break;
-        }
+        })
+        .map_err(|source| OrientTrainError::Monitor { step, source })?;
     }
     let (net, scores) = match best {
         Some(b) => b,

@@ -8,25 +8,22 @@ pub mod checkpoint;
 pub mod dataset;
 pub mod loader;
 pub mod plot;
+mod session;
 pub mod validate;
 
-use crate::camera::Camera;
 use crate::inpaint::Inpainter;
 use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
 use crate::model::loss::LossWeights;
-use crate::model::vgg::Vgg19;
 use crate::model::{weights, ModelConfig};
 use burn::module::Module;
 use burn::tensor::Device;
 use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS, GENERATOR_WEIGHTS};
-use dataset::{hold_back, scan_split, AugmentSettings, Cache, DataError, SampleRef};
-use loader::{Loader, LoaderPlan};
+use dataset::{hold_back, scan_split, AugmentSettings, DataError, SampleRef};
 use serde::{Deserialize, Serialize};
+use session::Session;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::time::Instant;
 use thiserror::Error;
 use validate::{Scores, ValItem};
 
@@ -547,271 +544,19 @@ impl Validator {
 /// Runs (or resumes) training until every stage ends, `max_steps` is reached or the monitor
 /// interrupts; a checkpoint is written in each case.
 pub fn train(job: Job, monitor: &mut dyn Monitor) -> Result<Summary, TrainError> {
-    let settings = &job.settings;
-    let run = &job.run;
-    let autodiff = job.device.clone().autodiff();
-    let vgg = match &settings.vgg19 {
-        Some(path) => {
-            let vgg = Vgg19::load(path, &autodiff).map_err(|e| TrainError::Run {
-                path: path.clone(),
-                problem: e.to_string(),
-            })?;
-            monitor.message(&format!(
-                "perceptual and style terms on VGG19 features from {}",
-                path.display()
-            ));
-            Some(vgg)
-        }
-        None => None,
-    };
-    let (train_samples, val_samples, what) = samples(&job.data, settings.val_fraction)?;
-    monitor.message(&what);
-    let cameras = Camera::set(&settings.views, job.model.size).map_err(|e| TrainError::Run {
-        path: job.data.clone(),
-        problem: e.to_string(),
-    })?;
-    let cache = Arc::new(Cache::new(job.cache_bytes));
-    let data_size = cache.get(&train_samples[0].gt, &settings.views)?.size;
-    if data_size < job.model.size {
-        monitor.warn(&format!(
-            "the data's views are {data_size}² and the model's {}²: views rendered larger than \
-             they were made leave holes in the ground truth; prepare the data with --size {}",
-            job.model.size, job.model.size
-        ));
-    }
-    let val_items = validate::build(
-        &validate::pick(&val_samples, settings.val_samples),
-        &cameras,
-        &cache,
-    )?;
-    // Only now: data that is refused must leave no run directory behind.
-    std::fs::create_dir_all(run).map_err(io_err(run))?;
-
-    let (mut gan, mut state) = match checkpoint::latest(run)? {
-        Some(dir) if job.resume => {
-            let (gan, state) = checkpoint::load(
-                &dir,
-                job.model.clone(),
-                settings.loss.clone(),
-                settings.optim.clone(),
-                &autodiff,
-            )?;
-            checkpoint::restore_best(run, &state)?;
-            monitor.message(&format!("resuming from {} (step {})", dir.display(), state.step));
-            (gan, state)
-        }
-        Some(dir) => {
-            return Err(TrainError::Run {
-                path: run.clone(),
-                problem: format!(
-                    "already holds a training run ({}); pass --resume to continue it or choose another --out",
-                    dir.display()
-                ),
-            })
-        }
-        None => {
-            if job.resume {
-                // Killed before its first checkpoint: nothing was kept, so it starts over.
-                monitor.message("no checkpoint yet: starting from step 0");
-            }
-            autodiff.seed(settings.seed);
-            let gan = match &settings.init {
-                Some(init) => {
-                    let gan = init.load(&job, &autodiff)?;
-                    monitor.message(&format!(
-                        "starting from {}{}",
-                        init.generator.display(),
-                        init.discriminator.as_ref().map_or(
-                            " and a fresh discriminator".to_string(),
-                            |d| format!(" and {}", d.display())
-                        )
-                    ));
-                    gan
-                }
-                None => Gan::new(
-                    job.model.clone(),
-                    settings.loss.clone(),
-                    settings.optim.clone(),
-                    &autodiff,
-                )
-                .map_err(|e| TrainError::Run {
-                    path: run.clone(),
-                    problem: e.to_string(),
-                })?,
-            };
-            (gan, TrainState::new())
-        }
-    };
-    gan.vgg = vgg;
-    write_json(&run.join(CONFIG_FILE), &job.model)?;
-    write_json(&run.join(SETTINGS_FILE), settings)?;
-
-    let mut log = RunLog::open(run, state.step)?;
-    let validator = (!val_items.is_empty()).then(|| Validator {
-        items: val_items,
-        device: job.device.clone(),
-        batch: settings.batch,
-    });
-    let baseline = match &validator {
-        Some(v) => {
-            let scores = validate::baseline(&v.items);
-            if !log
-                .records
-                .iter()
-                .any(|r| matches!(r, LogRecord::Baseline { .. }))
-            {
-                let record = LogRecord::Baseline {
-                    scores: scores.clone(),
-                };
-                monitor.record(&record);
-                log.push(record)?;
-            }
-            Some(scores)
-        }
-        None => {
-            monitor.message("no validation samples: stages end by their step budget only");
-            None
-        }
-    };
-
-    let loader = Loader::spawn(
-        Arc::new(train_samples),
-        cameras,
-        cache,
-        LoaderPlan {
-            seed: settings.seed,
-            batch: settings.batch,
-            accumulate: settings.accumulate,
-            first_step: state.step,
-            augment: settings.augment,
-            channels: job.model.channels,
-            prefetch: job.prefetch,
-            workers: job.workers,
-        },
-    );
-    let planned = job.max_steps.map_or(settings.planned_steps(), |m| {
-        m.min(settings.planned_steps())
-    });
-    monitor.start(state.step, planned);
-
-    let mut last_checkpoint = checkpoint::latest(run)?;
-    let mut last_scores = None;
-    let mut interval = Interval::new();
+    let mut session = Session::open(&job, monitor)?;
+    let (first, planned) = session.plan();
+    monitor.start(first, planned);
     let outcome = loop {
-        if state.finished {
-            break Outcome::Finished;
+        if let Some(outcome) = session.stop(monitor) {
+            break outcome;
         }
-        if job.max_steps.is_some_and(|m| state.step >= m) {
-            break Outcome::StepLimit;
-        }
-        if monitor.interrupted() {
-            break Outcome::Interrupted;
-        }
-        let waited = Instant::now();
-        let data = loader.next()?;
-        debug_assert_eq!(data.step, state.step);
-        let started = Instant::now();
-        interval.wait += (started - waited).as_secs_f64();
-        let rate = settings.stage_rates[state.stage];
-        // The total-variation term joins from stage `tv_from_stage` (1-based) on.
-        gan.weights.tv = if state.stage + 1 < settings.tv_from_stage {
-            0.0
-        } else {
-            settings.loss.tv
-        };
-        let batches = data
-            .micro
-            .into_iter()
-            .map(|b| b.to_device(&autodiff))
-            .collect::<Vec<_>>();
-        let (next, losses) = gan.step(&batches, rate);
-        gan = next;
-        if let Some((term, value)) = losses.first_non_finite() {
-            return Err(TrainError::NonFinite {
-                term,
-                value,
-                step: state.step + 1,
-                last_good: last_checkpoint,
-            });
-        }
-        state.step += 1;
-        interval.add(&losses, started.elapsed().as_secs_f64());
-        monitor.stepped(state.step, &losses);
-
-        if state.step.is_multiple_of(settings.log_every.max(1)) {
-            let record = interval.record(state.step, state.stage, rate);
-            monitor.record(&record);
-            log.push(record)?;
-        }
-        let mut improved = false;
-        if let Some(v) = validator
-            .as_ref()
-            .filter(|_| settings.val_every > 0 && state.step.is_multiple_of(settings.val_every))
-        {
-            let scores = v.run_logged(&gan, run, (state.step, state.stage), monitor, &mut log)?;
-            improved = advance_on_validation(&mut state, &scores);
-            log.draw(run)?;
-            last_scores = Some(scores);
-        }
-        let budget_spent = state.step - state.stage_start >= settings.stage_steps;
-        if budget_spent || state.validations_without_improvement >= settings.patience.max(1) {
-            state.stage += 1;
-            state.stage_start = state.step;
-            state.stage_best_cd = None;
-            state.validations_without_improvement = 0;
-            if state.stage >= settings.stage_rates.len() {
-                state.finished = true;
-            } else {
-                monitor.message(&format!(
-                    "step {}: stage {} (learning rate {:e})",
-                    state.step,
-                    state.stage + 1,
-                    settings.stage_rates[state.stage]
-                ));
-            }
-        }
-        if improved || state.step.is_multiple_of(settings.checkpoint_every.max(1)) {
-            let dir = checkpoint::save(run, &gan, &state, settings.keep)?;
-            if improved {
-                checkpoint::keep_as_best(run, &dir)?;
-            }
-            last_checkpoint = Some(dir);
-        }
+        session = session.step(monitor)?;
+        let improved = session.validate(monitor)?;
+        session.advance_stage(monitor);
+        session.checkpoint(improved)?;
     };
-
-    // However the run ended, its last step is validated and its samples drawn, so a short run
-    // still shows where it got to. This validation is logged but leaves the stage and patience
-    // alone: a run stopped and resumed continues exactly as one that never stopped.
-    let validated = log
-        .records
-        .iter()
-        .any(|r| matches!(r, LogRecord::Validation { step, .. } if *step == state.step));
-    if let Some(v) = validator.as_ref().filter(|_| state.step > 0 && !validated) {
-        let stage = state
-            .stage
-            .min(settings.stage_rates.len().saturating_sub(1));
-        last_scores = Some(v.run_logged(&gan, run, (state.step, stage), monitor, &mut log)?);
-    }
-    let dir = match &last_checkpoint {
-        Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
-        _ => checkpoint::save(run, &gan, &state, settings.keep)?,
-    };
-    for name in [GENERATOR_WEIGHTS, DISCRIMINATOR_WEIGHTS] {
-        let weights = run.join(name);
-        // Copied whole or not at all, so a kill here leaves no cut-off weights file.
-        atomic_write(&weights, |w| {
-            std::io::copy(&mut std::fs::File::open(dir.join(name))?, w).map(|_| ())
-        })
-        .map_err(io_err(&weights))?;
-    }
-    log.draw(run)?;
-    Ok(Summary {
-        outcome,
-        state,
-        checkpoint: dir,
-        baseline,
-        last: last_scores,
-    })
+    session.finish(outcome, monitor)
 }
 
 /// Updates the best scores and the patience counter; true when the CD is the run's best.

@@ -331,6 +331,35 @@ fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec
 }
 
 pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
+    if let (Some(data), Some(pred_dir)) = (&args.data, &args.pred_dir) {
+        return eval_dataset(data, pred_dir, &args, log);
+    }
+    let (geometry, color) = check(&args)?;
+    let mut out = Map::new();
+    out.insert(
+        "normalization".into(),
+        json!(match args.normalize {
+            Normalize::None => "none",
+            Normalize::GtBox => "gt-box",
+        }),
+    );
+    out.insert("thresholds".into(), json!(args.tau));
+    let mut table = Vec::new();
+    if geometry {
+        eval_clouds(&args, log, &mut out, &mut table)?;
+    }
+    if color {
+        if !table.is_empty() {
+            table.push(String::new());
+        }
+        eval_view_dirs(&args, &mut out, &mut table)?;
+    }
+    print_results(args.json, out, &table)
+}
+
+/// Which kinds of metric the options ask for (geometry, colour), after checking that they
+/// name what those need.
+fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
     let geometry = args
         .metrics
         .iter()
@@ -339,9 +368,6 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
         .metrics
         .iter()
         .any(|m| matches!(m, Metric::Psnr | Metric::Ssim | Metric::Mae));
-    if let (Some(data), Some(pred_dir)) = (&args.data, &args.pred_dir) {
-        return eval_dataset(data, pred_dir, &args, log);
-    }
     if args.pred_dir.is_some() && args.gt_dir.is_none() {
         bail!("--pred-dir needs --gt-dir or --data");
     }
@@ -355,123 +381,117 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
     if let Some(t) = args.tau.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
         bail!("--tau {t}: thresholds must be positive numbers");
     }
+    Ok((geometry, color))
+}
 
-    let mut out = Map::new();
-    out.insert(
-        "normalization".into(),
-        json!(match args.normalize {
-            Normalize::None => "none",
-            Normalize::GtBox => "gt-box",
-        }),
+/// CD and F-scores of `--pred`/`--gt` or of matched files in `--pred-dir`/`--gt-dir`.
+fn eval_clouds(
+    args: &EvalArgs,
+    log: Log,
+    out: &mut Map<String, Value>,
+    table: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let pairs = match (&args.pred, &args.gt, &args.pred_dir, &args.gt_dir) {
+        (Some(pred), Some(gt), _, _) => vec![Pair {
+            name: pred
+                .file_stem()
+                .map_or("pred".into(), |s| s.to_string_lossy().into_owned()),
+            pred: pred.clone(),
+            gt: gt.clone(),
+        }],
+        (_, _, Some(pd), Some(gd)) => matched_pairs(pd, gd, args.input.format)?,
+        _ => unreachable!("checked: clouds were given"),
+    };
+    let bar = super::progress(pairs.len(), "eval", log);
+    let mut results = Vec::with_capacity(pairs.len());
+    for pair in &pairs {
+        bar.set_message(pair.name.clone());
+        results.push(score(pair, args, log)?);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    table.push(table_header(&args.metrics, &args.tau));
+    let mut rows = Vec::new();
+    for (pair, m) in pairs.iter().zip(&results) {
+        table.push(table_row(&pair.name, m, &args.metrics));
+        let mut o = Map::new();
+        o.insert("name".into(), json!(pair.name));
+        o.insert("pred".into(), json!(pair.pred.display().to_string()));
+        o.insert("gt".into(), json!(pair.gt.display().to_string()));
+        o.insert("pred_points".into(), json!(m.pred_points));
+        o.insert("gt_points".into(), json!(m.gt_points));
+        o.extend(cloud_json(m, &args.metrics));
+        rows.push(Value::Object(o));
+    }
+    out.insert("pairs".into(), Value::Array(rows));
+    if results.len() > 1 {
+        let mean = mean_metrics(&results);
+        table.push(table_row(
+            &format!("mean of {}", results.len()),
+            &mean,
+            &args.metrics,
+        ));
+        out.insert(
+            "mean".into(),
+            Value::Object(cloud_json(&mean, &args.metrics)),
+        );
+    }
+    Ok(())
+}
+
+/// PSNR, SSIM and MAE of `--pred-views` against `--gt-views`, per view and averaged.
+fn eval_view_dirs(
+    args: &EvalArgs,
+    out: &mut Map<String, Value>,
+    table: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let (Some(pred_dir), Some(gt_dir)) = (&args.pred_views, &args.gt_views) else {
+        unreachable!("checked: clap requires both");
+    };
+    let (cameras, per_view) = eval_views(pred_dir, gt_dir)?;
+    let n = per_view.len() as f64;
+    let mean = ImageMetrics {
+        psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / n,
+        ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / n,
+        mae: per_view.iter().map(|m| m.mae).sum::<f64>() / n,
+    };
+    let pick = |m: &ImageMetrics| {
+        let mut o = Map::new();
+        if args.metrics.contains(&Metric::Psnr) {
+            o.insert("psnr_db".into(), json!(m.psnr));
+        }
+        if args.metrics.contains(&Metric::Ssim) {
+            o.insert("ssim".into(), json!(m.ssim));
+        }
+        if args.metrics.contains(&Metric::Mae) {
+            o.insert("mae".into(), json!(m.mae));
+        }
+        o
+    };
+    let mut views = pick(&mean);
+    views.insert("pred".into(), json!(pred_dir.display().to_string()));
+    views.insert("gt".into(), json!(gt_dir.display().to_string()));
+    views.insert("cameras".into(), json!(cameras));
+    views.insert(
+        "per_view".into(),
+        Value::Array(per_view.iter().map(|m| Value::Object(pick(m))).collect()),
     );
-    out.insert("thresholds".into(), json!(args.tau));
-    let mut table = Vec::new();
-
-    if geometry {
-        let pairs = match (&args.pred, &args.gt, &args.pred_dir, &args.gt_dir) {
-            (Some(pred), Some(gt), _, _) => vec![Pair {
-                name: pred
-                    .file_stem()
-                    .map_or("pred".into(), |s| s.to_string_lossy().into_owned()),
-                pred: pred.clone(),
-                gt: gt.clone(),
-            }],
-            (_, _, Some(pd), Some(gd)) => matched_pairs(pd, gd, args.input.format)?,
-            _ => unreachable!("checked above: clouds were given"),
-        };
-        let bar = super::progress(pairs.len(), "eval", log);
-        let mut results = Vec::with_capacity(pairs.len());
-        for pair in &pairs {
-            bar.set_message(pair.name.clone());
-            results.push(score(pair, &args, log)?);
-            bar.inc(1);
-        }
-        bar.finish_and_clear();
-        table.push(table_header(&args.metrics, &args.tau));
-        let mut rows = Vec::new();
-        for (pair, m) in pairs.iter().zip(&results) {
-            table.push(table_row(&pair.name, m, &args.metrics));
-            let mut o = Map::new();
-            o.insert("name".into(), json!(pair.name));
-            o.insert("pred".into(), json!(pair.pred.display().to_string()));
-            o.insert("gt".into(), json!(pair.gt.display().to_string()));
-            o.insert("pred_points".into(), json!(m.pred_points));
-            o.insert("gt_points".into(), json!(m.gt_points));
-            o.extend(cloud_json(m, &args.metrics));
-            rows.push(Value::Object(o));
-        }
-        out.insert("pairs".into(), Value::Array(rows));
-        if results.len() > 1 {
-            let mean = mean_metrics(&results);
-            table.push(table_row(
-                &format!("mean of {}", results.len()),
-                &mean,
-                &args.metrics,
-            ));
-            out.insert(
-                "mean".into(),
-                Value::Object(cloud_json(&mean, &args.metrics)),
-            );
-        }
+    out.insert("views".into(), Value::Object(views));
+    table.push(format!(
+        "{:<8} {:>10} {:>10} {:>10}",
+        "view", "psnr_db", "ssim", "mae"
+    ));
+    let row = |name: String, m: &ImageMetrics| {
+        format!(
+            "{name:<8} {:>10.4} {:>10.6} {:>10.6}",
+            m.psnr, m.ssim, m.mae
+        )
+    };
+    for (c, m) in cameras.iter().zip(&per_view) {
+        table.push(row(format!("{c:03}"), m));
     }
-
-    if color {
-        let (pred_dir, gt_dir) = (
-            args.pred_views.as_ref().unwrap(),
-            args.gt_views.as_ref().unwrap(),
-        );
-        let (cameras, per_view) = eval_views(pred_dir, gt_dir)?;
-        let n = per_view.len() as f64;
-        let mean = ImageMetrics {
-            psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / n,
-            ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / n,
-            mae: per_view.iter().map(|m| m.mae).sum::<f64>() / n,
-        };
-        let pick = |m: &ImageMetrics| {
-            let mut o = Map::new();
-            if args.metrics.contains(&Metric::Psnr) {
-                o.insert("psnr_db".into(), json!(m.psnr));
-            }
-            if args.metrics.contains(&Metric::Ssim) {
-                o.insert("ssim".into(), json!(m.ssim));
-            }
-            if args.metrics.contains(&Metric::Mae) {
-                o.insert("mae".into(), json!(m.mae));
-            }
-            o
-        };
-        let mut views = pick(&mean);
-        views.insert("pred".into(), json!(pred_dir.display().to_string()));
-        views.insert("gt".into(), json!(gt_dir.display().to_string()));
-        views.insert("cameras".into(), json!(cameras));
-        views.insert(
-            "per_view".into(),
-            Value::Array(per_view.iter().map(|m| Value::Object(pick(m))).collect()),
-        );
-        out.insert("views".into(), Value::Object(views));
-        if !table.is_empty() {
-            table.push(String::new());
-        }
-        table.push(format!(
-            "{:<8} {:>10} {:>10} {:>10}",
-            "view", "psnr_db", "ssim", "mae"
-        ));
-        for (c, m) in cameras.iter().zip(&per_view) {
-            table.push(format!(
-                "{:<8} {:>10.4} {:>10.6} {:>10.6}",
-                format!("{c:03}"),
-                m.psnr,
-                m.ssim,
-                m.mae
-            ));
-        }
-        table.push(format!(
-            "{:<8} {:>10.4} {:>10.6} {:>10.6}",
-            "mean", mean.psnr, mean.ssim, mean.mae
-        ));
-    }
-
-    print_results(args.json, out, &table)
+    table.push(row("mean".into(), &mean));
+    Ok(())
 }
 
 /// The results on stdout: the JSON object with `--json`, the table otherwise.

@@ -3,14 +3,14 @@ use crate::camera::check_view_set;
 use crate::cli::PrepareArgs;
 use crate::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
-    MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
+    Source, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
 };
 use crate::io::atomic_write;
 use crate::scan::PartialParams;
 use anyhow::{bail, Context};
 use rayon::prelude::*;
 use serde::Serialize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
@@ -29,6 +29,76 @@ struct Summary {
     shard: Option<String>,
     /// The manifest written, by a run without `--shard`.
     manifest: Option<String>,
+}
+
+/// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
+fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {
+    match (&args.meshes, args.synth) {
+        (Some(dir), _) => {
+            if !dir.is_dir() {
+                bail!("{}: not a directory", dir.display());
+            }
+            Ok(dir.clone())
+        }
+        (None, Some(count)) => {
+            let dir = args.out.join("meshes");
+            synth::generate(
+                &dir,
+                count,
+                &args.synth_options.category,
+                args.synth_options.seed,
+                true,
+                log,
+            )?;
+            Ok(dir)
+        }
+        (None, None) => unreachable!("clap requires --meshes or --synth"),
+    }
+}
+
+/// Prepares `todo` in parallel with a progress bar: the models made and the meshes skipped
+/// for a problem of their own; any other error (a full disk) stops the run.
+fn prepare_all(
+    todo: &[&Source],
+    params: &PrepareParams,
+    layout: &Layout,
+    log: Log,
+) -> anyhow::Result<(Vec<ModelEntry>, Vec<Skipped>)> {
+    let bar = super::progress(todo.len(), "prepare", log);
+    let stop = AtomicBool::new(false);
+    let failed = Mutex::new(Vec::new());
+    let fatal = Mutex::new(None);
+    let made: Vec<ModelEntry> = todo
+        .par_iter()
+        .filter_map(|source| {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            let result = prepare_model(source, params, layout);
+            bar.inc(1);
+            match result {
+                Ok(entry) => Some(entry),
+                Err(e) if e.is_input_problem() => {
+                    bar.suspend(|| log.warn(format!("skipped {e}")));
+                    failed.lock().expect("not poisoned").push(Skipped {
+                        path: source.path.clone(),
+                        problem: e.to_string(),
+                    });
+                    None
+                }
+                Err(e) => {
+                    stop.store(true, Ordering::Relaxed);
+                    fatal.lock().expect("not poisoned").get_or_insert(e);
+                    None
+                }
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    if let Some(e) = fatal.into_inner().expect("not poisoned") {
+        return Err(e.into());
+    }
+    Ok((made, failed.into_inner().expect("not poisoned")))
 }
 
 /// Writes the dataset's manifest; its path.
@@ -147,27 +217,7 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("{}: exists and is not a directory", out.display());
     }
-    let meshes = match (&args.meshes, args.synth) {
-        (Some(dir), _) => {
-            if !dir.is_dir() {
-                bail!("{}: not a directory", dir.display());
-            }
-            dir.clone()
-        }
-        (None, Some(count)) => {
-            let dir = out.join("meshes");
-            synth::generate(
-                &dir,
-                count,
-                &args.synth_options.category,
-                args.synth_options.seed,
-                true,
-                log,
-            )?;
-            dir
-        }
-        (None, None) => unreachable!("clap requires --meshes or --synth"),
-    };
+    let meshes = meshes_dir(&args, log)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     claim(out, &params)?;
     let (mut sources, mut skipped) = discover(&meshes)?;
@@ -199,45 +249,12 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
         ));
     }
     let started = std::time::Instant::now();
-    let bar = super::progress(todo.len(), "prepare", log);
-    let stop = AtomicBool::new(false);
-    let failed = Mutex::new(Vec::new());
-    let fatal = Mutex::new(None);
-    let made: Vec<ModelEntry> = todo
-        .par_iter()
-        .filter_map(|source| {
-            if stop.load(Ordering::Relaxed) {
-                return None;
-            }
-            let result = prepare_model(source, &params, &layout);
-            bar.inc(1);
-            match result {
-                Ok(entry) => Some(entry),
-                Err(e) if e.is_input_problem() => {
-                    bar.suspend(|| log.warn(format!("skipped {e}")));
-                    failed.lock().expect("not poisoned").push(Skipped {
-                        path: source.path.clone(),
-                        problem: e.to_string(),
-                    });
-                    None
-                }
-                Err(e) => {
-                    stop.store(true, Ordering::Relaxed);
-                    fatal.lock().expect("not poisoned").get_or_insert(e);
-                    None
-                }
-            }
-        })
-        .collect();
-    bar.finish_and_clear();
-    if let Some(e) = fatal.into_inner().expect("not poisoned") {
-        return Err(e.into());
-    }
+    let (made, failed) = prepare_all(&todo, &params, &layout, log)?;
     let seconds = started.elapsed().as_secs_f64();
     let new = made.len();
     done.extend(made);
     done.sort_by(|a, b| (&a.category, &a.name).cmp(&(&b.category, &b.name)));
-    skipped.extend(failed.into_inner().expect("not poisoned"));
+    skipped.extend(failed);
     skipped.sort_by(|a, b| a.path.cmp(&b.path));
     let summary = Summary {
         models: done.len(),

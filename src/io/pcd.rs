@@ -74,12 +74,20 @@ fn malformed(msg: impl Into<String>) -> Problem {
     Problem::Malformed(msg.into())
 }
 
+/// What the header lines before `DATA` declared.
+#[derive(Default)]
+struct Declared {
+    names: Option<Vec<String>>,
+    sizes: Option<Vec<usize>>,
+    kinds: Option<Vec<char>>,
+    counts: Option<Vec<usize>>,
+    width: Option<usize>,
+    height: Option<usize>,
+    points: Option<usize>,
+}
+
 fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
-    let mut names: Option<Vec<String>> = None;
-    let mut sizes: Option<Vec<usize>> = None;
-    let mut kinds: Option<Vec<char>> = None;
-    let mut counts: Option<Vec<usize>> = None;
-    let (mut width, mut height, mut points) = (None, None, None);
+    let mut declared = Declared::default();
     let mut pos = 0;
     let mut line_no = 0;
     while pos < bytes.len() {
@@ -95,6 +103,16 @@ fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
         if line.is_empty() {
             continue;
         }
+        if let Some(data) = declared.line(line, line_no)? {
+            return declared.header(data, pos);
+        }
+    }
+    Err(malformed("header has no DATA line"))
+}
+
+impl Declared {
+    /// Takes one header line; the body's encoding once the line is `DATA`.
+    fn line(&mut self, line: &str, line_no: usize) -> Result<Option<Data>, Problem> {
         let mut words = line.split_whitespace();
         let key = words.next().unwrap_or("").to_ascii_uppercase();
         let rest: Vec<&str> = words.collect();
@@ -117,85 +135,23 @@ fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
         };
         match key.as_str() {
             "VERSION" | "VIEWPOINT" => {}
-            "FIELDS" | "COLUMNS" => names = Some(rest.iter().map(|s| s.to_string()).collect()),
-            "SIZE" => sizes = Some(numbers("SIZE")?),
-            "COUNT" => counts = Some(numbers("COUNT")?),
-            "TYPE" => {
-                kinds = Some(
-                    rest.iter()
-                        .map(|t| match t.to_ascii_uppercase().as_str() {
-                            "I" => Ok('I'),
-                            "U" => Ok('U'),
-                            "F" => Ok('F'),
-                            _ => Err(malformed(format!(
-                                "header line {line_no}: unknown TYPE {t:?}"
-                            ))),
-                        })
-                        .collect::<Result<_, _>>()?,
-                )
-            }
-            "WIDTH" => width = Some(single("WIDTH")?),
-            "HEIGHT" => height = Some(single("HEIGHT")?),
-            "POINTS" => points = Some(single("POINTS")?),
+            "FIELDS" | "COLUMNS" => self.names = Some(rest.iter().map(|s| s.to_string()).collect()),
+            "SIZE" => self.sizes = Some(numbers("SIZE")?),
+            "COUNT" => self.counts = Some(numbers("COUNT")?),
+            "TYPE" => self.kinds = Some(kinds(&rest, line_no)?),
+            "WIDTH" => self.width = Some(single("WIDTH")?),
+            "HEIGHT" => self.height = Some(single("HEIGHT")?),
+            "POINTS" => self.points = Some(single("POINTS")?),
             "DATA" => {
-                let data = match rest.first().map(|s| s.to_ascii_lowercase()).as_deref() {
-                    Some("ascii") => Data::Ascii,
-                    Some("binary") => Data::Binary,
-                    Some("binary_compressed") => Data::Compressed,
-                    other => {
-                        return Err(malformed(format!(
+                return match rest.first().map(|s| s.to_ascii_lowercase()).as_deref() {
+                    Some("ascii") => Ok(Some(Data::Ascii)),
+                    Some("binary") => Ok(Some(Data::Binary)),
+                    Some("binary_compressed") => Ok(Some(Data::Compressed)),
+                    other => Err(malformed(format!(
                         "unknown DATA encoding {:?} (expected ascii, binary or binary_compressed)",
                         other.unwrap_or("")
-                    )))
-                    }
-                };
-                let names = names.ok_or_else(|| malformed("header has no FIELDS line"))?;
-                let n = names.len();
-                let sizes = sizes.unwrap_or_else(|| vec![4; n]);
-                let kinds = kinds.unwrap_or_else(|| vec!['F'; n]);
-                let counts = counts.unwrap_or_else(|| vec![1; n]);
-                if sizes.len() != n || kinds.len() != n || counts.len() != n {
-                    return Err(malformed(
-                        "FIELDS, SIZE, TYPE and COUNT list different numbers of fields",
-                    ));
+                    ))),
                 }
-                let fields: Vec<Field> = (0..n)
-                    .map(|i| Field {
-                        name: names[i].clone(),
-                        size: sizes[i],
-                        kind: kinds[i],
-                        count: counts[i],
-                    })
-                    .collect();
-                for f in &fields {
-                    if f.scalar_kind().is_none() && f.name != "_" {
-                        return Err(malformed(format!(
-                            "field {:?} has unsupported TYPE {} SIZE {}",
-                            f.name, f.kind, f.size
-                        )));
-                    }
-                }
-                for axis in ["x", "y", "z"] {
-                    match fields.iter().find(|f| f.name == axis) {
-                        None => return Err(malformed(format!("no '{axis}' field"))),
-                        Some(f) if f.kind != 'F' || f.count != 1 => {
-                            return Err(malformed(format!("field '{axis}' must be a single float")))
-                        }
-                        Some(_) => {}
-                    }
-                }
-                let points = match (points, width, height) {
-                    (Some(p), _, _) => p,
-                    (None, Some(w), Some(h)) => w.saturating_mul(h),
-                    _ => return Err(malformed("header has neither POINTS nor WIDTH and HEIGHT")),
-                };
-                check_points(points)?;
-                return Ok(Header {
-                    fields,
-                    points,
-                    data,
-                    body: pos,
-                });
             }
             _ => {
                 return Err(malformed(format!(
@@ -203,8 +159,76 @@ fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
                 )))
             }
         }
+        Ok(None)
     }
-    Err(malformed("header has no DATA line"))
+
+    /// The header the lines declared, its body starting at byte `body`, once checked: fields
+    /// of known types, x, y and z single floats, and a point count within the stated limit.
+    fn header(self, data: Data, body: usize) -> Result<Header, Problem> {
+        let names = self
+            .names
+            .ok_or_else(|| malformed("header has no FIELDS line"))?;
+        let n = names.len();
+        let sizes = self.sizes.unwrap_or_else(|| vec![4; n]);
+        let kinds = self.kinds.unwrap_or_else(|| vec!['F'; n]);
+        let counts = self.counts.unwrap_or_else(|| vec![1; n]);
+        if sizes.len() != n || kinds.len() != n || counts.len() != n {
+            return Err(malformed(
+                "FIELDS, SIZE, TYPE and COUNT list different numbers of fields",
+            ));
+        }
+        let fields: Vec<Field> = (0..n)
+            .map(|i| Field {
+                name: names[i].clone(),
+                size: sizes[i],
+                kind: kinds[i],
+                count: counts[i],
+            })
+            .collect();
+        for f in &fields {
+            if f.scalar_kind().is_none() && f.name != "_" {
+                return Err(malformed(format!(
+                    "field {:?} has unsupported TYPE {} SIZE {}",
+                    f.name, f.kind, f.size
+                )));
+            }
+        }
+        for axis in ["x", "y", "z"] {
+            match fields.iter().find(|f| f.name == axis) {
+                None => return Err(malformed(format!("no '{axis}' field"))),
+                Some(f) if f.kind != 'F' || f.count != 1 => {
+                    return Err(malformed(format!("field '{axis}' must be a single float")))
+                }
+                Some(_) => {}
+            }
+        }
+        let points = match (self.points, self.width, self.height) {
+            (Some(p), _, _) => p,
+            (None, Some(w), Some(h)) => w.saturating_mul(h),
+            _ => return Err(malformed("header has neither POINTS nor WIDTH and HEIGHT")),
+        };
+        check_points(points)?;
+        Ok(Header {
+            fields,
+            points,
+            data,
+            body,
+        })
+    }
+}
+
+/// A `TYPE` line's letters.
+fn kinds(rest: &[&str], line_no: usize) -> Result<Vec<char>, Problem> {
+    rest.iter()
+        .map(|t| match t.to_ascii_uppercase().as_str() {
+            "I" => Ok('I'),
+            "U" => Ok('U'),
+            "F" => Ok('F'),
+            _ => Err(malformed(format!(
+                "header line {line_no}: unknown TYPE {t:?}"
+            ))),
+        })
+        .collect()
 }
 
 /// Collects one point's fields (given as little-endian byte slices) into the cloud.

@@ -252,88 +252,14 @@ pub fn car(rng: &mut Lcg) -> (Builder, String) {
     let style = *rng.pick(&CAR_STYLES);
     let mut b = Builder::default();
     let r = |rng: &mut Lcg, lo: f64, hi: f64| rng.range(lo, hi) as f32;
-    // Ranges of length, width, height and wheel radius (m); ground clearance; hood length as a
-    // share of the car's.
-    let (ranges, clearance, hood): ([(f64, f64); 4], f32, f32) = match style {
-        CarStyle::Sedan => (
-            [(4.3, 5.0), (1.72, 1.88), (1.38, 1.5), (0.30, 0.34)],
-            0.14,
-            0.27,
-        ),
-        CarStyle::Hatchback => (
-            [(3.6, 4.3), (1.62, 1.8), (1.42, 1.55), (0.28, 0.32)],
-            0.14,
-            0.22,
-        ),
-        CarStyle::Estate => (
-            [(4.5, 5.0), (1.75, 1.88), (1.45, 1.55), (0.31, 0.34)],
-            0.15,
-            0.25,
-        ),
-        CarStyle::Suv => (
-            [(4.3, 5.0), (1.8, 1.98), (1.62, 1.85), (0.34, 0.39)],
-            0.21,
-            0.25,
-        ),
-        CarStyle::Van => (
-            [(4.7, 5.6), (1.85, 2.0), (1.85, 2.3), (0.32, 0.36)],
-            0.17,
-            0.13,
-        ),
-        CarStyle::Pickup => (
-            [(5.0, 5.6), (1.85, 2.0), (1.7, 1.9), (0.36, 0.40)],
-            0.22,
-            0.28,
-        ),
-    };
+    let (ranges, clearance, hood) = car_shape(style);
     let [length, width, height, wheel_r] = ranges.map(|(lo, hi)| rng.range(lo, hi) as f32);
     let (z0, z1) = (-length / 2.0, length / 2.0);
     let hood_h = (height * 0.66).max(0.85);
     let belt = hood_h + 0.04;
     let zw = z0 + hood * length;
     let zr1 = zw + (height - hood_h) * if style == CarStyle::Van { 0.9 } else { 1.6 };
-    let mut top = vec![
-        (z0, hood_h - 0.14),
-        (z0 + 0.3, hood_h - 0.02),
-        (zw, hood_h),
-        (zr1, height),
-    ];
-    let (zr2, zt) = match style {
-        CarStyle::Sedan => {
-            let zr2 = zr1 + 0.3 * length;
-            let zt = zr2 + 0.55;
-            top.extend([
-                (zr2, height),
-                (zt, belt + 0.08),
-                (z1 - 0.12, belt + 0.06),
-                (z1, belt - 0.06),
-            ]);
-            (zr2, zt)
-        }
-        CarStyle::Hatchback => {
-            let zr2 = z1 - 0.45;
-            top.extend([
-                (zr2, height),
-                (z1 - 0.08, height - 0.4),
-                (z1, height - 0.46),
-            ]);
-            (zr2, z1 - 0.08)
-        }
-        CarStyle::Estate | CarStyle::Suv | CarStyle::Van => {
-            let zr2 = z1 - 0.22;
-            top.extend([
-                (zr2, height),
-                (z1 - 0.04, height - 0.22),
-                (z1, height - 0.3),
-            ]);
-            (zr2, z1 - 0.04)
-        }
-        CarStyle::Pickup => {
-            let zr2 = zr1 + 1.25;
-            top.extend([(zr2, height), (zr2 + 0.08, belt + 0.05), (z1, belt + 0.05)]);
-            (zr2, zr2 + 0.08)
-        }
-    };
+    let (top, zr2, zt) = car_roofline(style, (z0, z1), zw, zr1, (hood_h, belt, height));
     let front_axle = z0 + r(rng, 0.78, 0.95);
     let rear_axle = z1 - r(rng, 0.8, 1.05);
     let arch = wheel_r + 0.05;
@@ -379,17 +305,147 @@ pub fn car(rng: &mut Lcg) -> (Builder, String) {
             wheel(&mut b, [side * track, wheel_r, z], wheel_r, 0.22, rim_m);
         }
     }
+    let bumper = if rng.chance(0.5) { paint_m } else { trim };
+    let ends = CarEnds {
+        z: (z0, z1),
+        width,
+        hood_h,
+        belt,
+        zw,
+        clearance,
+        paint: paint_m,
+        bumper,
+    };
+    car_ends(&mut b, &profile, &ends);
+    (b, format!("{style:?}").to_lowercase())
+}
+
+/// Ranges of a car style's length, width, height and wheel radius (m); its ground clearance;
+/// its hood's length as a share of the car's.
+fn car_shape(style: CarStyle) -> ([(f64, f64); 4], f32, f32) {
+    match style {
+        CarStyle::Sedan => (
+            [(4.3, 5.0), (1.72, 1.88), (1.38, 1.5), (0.30, 0.34)],
+            0.14,
+            0.27,
+        ),
+        CarStyle::Hatchback => (
+            [(3.6, 4.3), (1.62, 1.8), (1.42, 1.55), (0.28, 0.32)],
+            0.14,
+            0.22,
+        ),
+        CarStyle::Estate => (
+            [(4.5, 5.0), (1.75, 1.88), (1.45, 1.55), (0.31, 0.34)],
+            0.15,
+            0.25,
+        ),
+        CarStyle::Suv => (
+            [(4.3, 5.0), (1.8, 1.98), (1.62, 1.85), (0.34, 0.39)],
+            0.21,
+            0.25,
+        ),
+        CarStyle::Van => (
+            [(4.7, 5.6), (1.85, 2.0), (1.85, 2.3), (0.32, 0.36)],
+            0.17,
+            0.13,
+        ),
+        CarStyle::Pickup => (
+            [(5.0, 5.6), (1.85, 2.0), (1.7, 1.9), (0.36, 0.40)],
+            0.22,
+            0.28,
+        ),
+    }
+}
+
+/// The car's side profile from the front bumper over the roof to the tail, and where the roof
+/// ends (`zr2`) and the rear glass meets the body (`zt`).
+fn car_roofline(
+    style: CarStyle,
+    (z0, z1): (f32, f32),
+    zw: f32,
+    zr1: f32,
+    (hood_h, belt, height): (f32, f32, f32),
+) -> (Vec<(f32, f32)>, f32, f32) {
+    let length = z1 - z0;
+    let mut top = vec![
+        (z0, hood_h - 0.14),
+        (z0 + 0.3, hood_h - 0.02),
+        (zw, hood_h),
+        (zr1, height),
+    ];
+    let (zr2, zt) = match style {
+        CarStyle::Sedan => {
+            let zr2 = zr1 + 0.3 * length;
+            let zt = zr2 + 0.55;
+            top.extend([
+                (zr2, height),
+                (zt, belt + 0.08),
+                (z1 - 0.12, belt + 0.06),
+                (z1, belt - 0.06),
+            ]);
+            (zr2, zt)
+        }
+        CarStyle::Hatchback => {
+            let zr2 = z1 - 0.45;
+            top.extend([
+                (zr2, height),
+                (z1 - 0.08, height - 0.4),
+                (z1, height - 0.46),
+            ]);
+            (zr2, z1 - 0.08)
+        }
+        CarStyle::Estate | CarStyle::Suv | CarStyle::Van => {
+            let zr2 = z1 - 0.22;
+            top.extend([
+                (zr2, height),
+                (z1 - 0.04, height - 0.22),
+                (z1, height - 0.3),
+            ]);
+            (zr2, z1 - 0.04)
+        }
+        CarStyle::Pickup => {
+            let zr2 = zr1 + 1.25;
+            top.extend([(zr2, height), (zr2 + 0.08, belt + 0.05), (z1, belt + 0.05)]);
+            (zr2, zr2 + 0.08)
+        }
+    };
+    (top, zr2, zt)
+}
+
+/// Where a car's lights, plates, bumpers and mirrors go, and in which materials.
+struct CarEnds {
+    z: (f32, f32),
+    width: f32,
+    hood_h: f32,
+    belt: f32,
+    zw: f32,
+    clearance: f32,
+    paint: u32,
+    bumper: u32,
+}
+
+/// Head and tail lights, door mirrors, bumpers and number plates.
+fn car_ends(b: &mut Builder, profile: &Profile, e: &CarEnds) {
+    let (z0, z1) = e.z;
+    let (width, hood_h, belt, zw, clearance, paint_m, bumper) = (
+        e.width,
+        e.hood_h,
+        e.belt,
+        e.zw,
+        e.clearance,
+        e.paint,
+        e.bumper,
+    );
     let end_w = width / 2.0 * 0.86;
     let head = b.material("headlight", [236, 236, 222]);
     let tail = b.material("taillight", [186, 22, 24]);
     let plate = b.material("plate", [234, 234, 232]);
-    let bumper = if rng.chance(0.5) { paint_m } else { trim };
     for side in [-1.0f32, 1.0] {
         let x = (side * end_w * 0.55, side * end_w * 0.92);
         let x = (x.0.min(x.1), x.0.max(x.1));
-        end_panel(&mut b, z0, -1.0, x, (hood_h - 0.3, hood_h - 0.17), head);
+        end_panel(b, z0, -1.0, x, (hood_h - 0.3, hood_h - 0.17), head);
         let tail_h = piecewise(&profile.top, z1) - 0.1;
-        end_panel(&mut b, z1, 1.0, x, (tail_h - 0.14, tail_h), tail);
+        end_panel(b, z1, 1.0, x, (tail_h - 0.14, tail_h), tail);
         // Mirrors on the doors, below the windscreen's foot.
         let mx = (side * (width / 2.0 - 0.02), side * (width / 2.0 + 0.17));
         b.cuboid(
@@ -400,7 +456,7 @@ pub fn car(rng: &mut Lcg) -> (Builder, String) {
     }
     for (z, end) in [(z0, -1.0), (z1, 1.0)] {
         end_panel(
-            &mut b,
+            b,
             z - end * 0.02,
             end,
             (-end_w, end_w),
@@ -408,7 +464,7 @@ pub fn car(rng: &mut Lcg) -> (Builder, String) {
             bumper,
         );
         end_panel(
-            &mut b,
+            b,
             z + end * 0.02,
             end,
             (-0.26, 0.26),
@@ -416,7 +472,6 @@ pub fn car(rng: &mut Lcg) -> (Builder, String) {
             plate,
         );
     }
-    (b, format!("{style:?}").to_lowercase())
 }
 
 /// Window rows with pillars every `pitch` metres, and doors (full-height dark panels) at
@@ -450,10 +505,123 @@ impl Openings {
     }
 }
 
+const BUS_WIDTH: f32 = 2.55;
+const BUS_WHEEL_RADIUS: f32 = 0.5;
+
+/// The materials of a bus.
+struct BusMaterials {
+    paint: u32,
+    glass: u32,
+    door: u32,
+    under: u32,
+    rim: u32,
+}
+
+/// One section of a bus from `z0` to `z1`: body with windows and doors, wheels, and on the
+/// `first` section the windscreen, destination sign and roof unit.
+fn bus_section(
+    b: &mut Builder,
+    (z0, z1): (f32, f32),
+    (first, articulated): (bool, bool),
+    height: f32,
+    m: &BusMaterials,
+) {
+    let (width, wheel_r, len) = (BUS_WIDTH, BUS_WHEEL_RADIUS, z1 - z0);
+    let (paint_m, glass_m, door_m, under, rim_m) = (m.paint, m.glass, m.door, m.under, m.rim);
+    let top = vec![
+        (z0, height - if first { 0.15 } else { 0.05 }),
+        (z0 + 0.3, height),
+        (z1 - 0.3, height),
+        (z1, height - 0.08),
+    ];
+    let mut axles = vec![];
+    if first {
+        axles.push(z0 + 2.7);
+    }
+    axles.push(z1 - if first && articulated { 1.2 } else { 3.2 });
+    let profile = Profile {
+        z0,
+        z1,
+        width,
+        top,
+        belt: 1.1,
+        clearance: 0.3,
+        arches: axles
+            .iter()
+            .map(|&z| (z, wheel_r + 0.06, wheel_r))
+            .collect(),
+        roof_width: 0.97,
+        end_rounding: 0.25,
+    };
+    let doors: Vec<(f32, f32)> = (0..3)
+        .map(|d| {
+            let c = z0 + 0.9 + d as f32 * (len - 1.8) / 2.0;
+            (c - 0.6, c + 0.6)
+        })
+        .filter(|&(a, bb)| {
+            axles
+                .iter()
+                .all(|&w| (w - a).abs() > 0.7 && (w - bb).abs() > 0.7)
+        })
+        .collect();
+    let openings = Openings {
+        pitch: 1.3,
+        doors: doors.iter().map(|&(a, bb)| (a - z0, bb - z0)).collect(),
+        both_sides: false,
+        glass: glass_m,
+        door: door_m,
+        other: paint_m,
+    };
+    body(b, &profile, paint_m, |z, band, side| match band {
+        Band::Underside => under,
+        _ => openings.material(z - z0, band, side),
+    });
+    for &z in &axles {
+        for side in [-1.0, 1.0] {
+            wheel(
+                b,
+                [side * (width / 2.0 - 0.2), wheel_r, z],
+                wheel_r,
+                0.3,
+                rim_m,
+            );
+        }
+    }
+    if first {
+        end_panel(b, z0, -1.0, (-1.1, 1.1), (1.0, height - 0.35), glass_m);
+        let sign = b.material("sign", [250, 170, 30]);
+        end_panel(
+            b,
+            z0 - 0.01,
+            -1.0,
+            (-0.9, 0.9),
+            (height - 0.3, height - 0.12),
+            sign,
+        );
+        let roof_box = b.material("roof_unit", [200, 200, 198]);
+        b.cuboid(
+            [-0.8, height, z0 + 2.0],
+            [0.8, height + 0.28, z0 + 4.2],
+            roof_box,
+        );
+    }
+    let lights = b.material("headlight", [236, 236, 222]);
+    for side in [-1.0f32, 1.0] {
+        let x = (side * 0.85, side * 1.15);
+        end_panel(
+            b,
+            z0,
+            -1.0,
+            (x.0.min(x.1), x.0.max(x.1)),
+            (0.55, 0.75),
+            lights,
+        );
+    }
+}
+
 pub fn bus(rng: &mut Lcg) -> (Builder, String) {
     let mut b = Builder::default();
     let articulated = rng.chance(0.3);
-    let width = 2.55;
     let height = rng.range(2.95, 3.25) as f32;
     let lengths: Vec<f32> = if articulated {
         vec![rng.range(10.5, 11.5) as f32, rng.range(6.5, 7.5) as f32]
@@ -478,100 +646,18 @@ pub fn bus(rng: &mut Lcg) -> (Builder, String) {
     let door_m = b.material("door", [60, 64, 70]);
     let under = b.material("underbody", [34, 34, 36]);
     let rim_m = rim(&mut b, rng);
-    let wheel_r = 0.5;
     let mut z0 = -total / 2.0;
     for (i, &len) in lengths.iter().enumerate() {
         let z1 = z0 + len;
         let first = i == 0;
-        let top = vec![
-            (z0, height - if first { 0.15 } else { 0.05 }),
-            (z0 + 0.3, height),
-            (z1 - 0.3, height),
-            (z1, height - 0.08),
-        ];
-        let mut axles = vec![];
-        if first {
-            axles.push(z0 + 2.7);
-        }
-        axles.push(z1 - if first && articulated { 1.2 } else { 3.2 });
-        let profile = Profile {
-            z0,
-            z1,
-            width,
-            top,
-            belt: 1.1,
-            clearance: 0.3,
-            arches: axles
-                .iter()
-                .map(|&z| (z, wheel_r + 0.06, wheel_r))
-                .collect(),
-            roof_width: 0.97,
-            end_rounding: 0.25,
-        };
-        let doors: Vec<(f32, f32)> = (0..3)
-            .map(|d| {
-                let c = z0 + 0.9 + d as f32 * (len - 1.8) / 2.0;
-                (c - 0.6, c + 0.6)
-            })
-            .filter(|&(a, bb)| {
-                axles
-                    .iter()
-                    .all(|&w| (w - a).abs() > 0.7 && (w - bb).abs() > 0.7)
-            })
-            .collect();
-        let openings = Openings {
-            pitch: 1.3,
-            doors: doors.iter().map(|&(a, bb)| (a - z0, bb - z0)).collect(),
-            both_sides: false,
+        let materials = BusMaterials {
+            paint: paint_m,
             glass: glass_m,
             door: door_m,
-            other: paint_m,
+            under,
+            rim: rim_m,
         };
-        body(&mut b, &profile, paint_m, |z, band, side| match band {
-            Band::Underside => under,
-            _ => openings.material(z - z0, band, side),
-        });
-        for &z in &axles {
-            for side in [-1.0, 1.0] {
-                wheel(
-                    &mut b,
-                    [side * (width / 2.0 - 0.2), wheel_r, z],
-                    wheel_r,
-                    0.3,
-                    rim_m,
-                );
-            }
-        }
-        if first {
-            end_panel(&mut b, z0, -1.0, (-1.1, 1.1), (1.0, height - 0.35), glass_m);
-            let sign = b.material("sign", [250, 170, 30]);
-            end_panel(
-                &mut b,
-                z0 - 0.01,
-                -1.0,
-                (-0.9, 0.9),
-                (height - 0.3, height - 0.12),
-                sign,
-            );
-            let roof_box = b.material("roof_unit", [200, 200, 198]);
-            b.cuboid(
-                [-0.8, height, z0 + 2.0],
-                [0.8, height + 0.28, z0 + 4.2],
-                roof_box,
-            );
-        }
-        let lights = b.material("headlight", [236, 236, 222]);
-        for side in [-1.0f32, 1.0] {
-            let x = (side * 0.85, side * 1.15);
-            end_panel(
-                &mut b,
-                z0,
-                -1.0,
-                (x.0.min(x.1), x.0.max(x.1)),
-                (0.55, 0.75),
-                lights,
-            );
-        }
+        bus_section(&mut b, (z0, z1), (first, articulated), height, &materials);
         z0 = z1 + gap;
         if i + 1 < lengths.len() {
             let bellows = b.material("bellows", [40, 40, 40]);
@@ -697,6 +783,45 @@ pub fn truck(rng: &mut Lcg) -> (Builder, String) {
     (b, kind.to_string())
 }
 
+/// Two bogies of four wheels under a rail car starting at `z0`.
+fn bogies(b: &mut Builder, (z0, car_len): (f32, f32), floor: f32, (bogie, rim_m): (u32, u32)) {
+    for f in [0.17f32, 0.83] {
+        let c = z0 + car_len * f;
+        b.cuboid([-1.0, 0.25, c - 1.3], [1.0, floor - 0.02, c + 1.3], bogie);
+        for dz in [-0.9, 0.9] {
+            for side in [-1.0, 1.0] {
+                wheel(b, [side * 0.72, 0.42, c + dz], 0.42, 0.14, rim_m);
+            }
+        }
+    }
+}
+
+/// A pantograph on the roof at `height`, its base centred at `base_z`.
+fn pantograph(b: &mut Builder, base_z: f32, height: f32) {
+    let panto = b.material("pantograph", [60, 60, 64]);
+    b.cuboid(
+        [-0.6, height, base_z - 0.8],
+        [0.6, height + 0.18, base_z + 0.8],
+        panto,
+    );
+    let knee = [0.0, height + 0.95, base_z + 0.7];
+    b.beam(
+        [0.0, height + 0.18, base_z - 0.6],
+        knee,
+        0.04,
+        0.5,
+        [1.0, 0.0, 0.0],
+        panto,
+    );
+    let head = [0.0, height + 1.6, base_z - 0.2];
+    b.beam(knee, head, 0.03, 0.45, [1.0, 0.0, 0.0], panto);
+    b.cuboid(
+        [-0.9, head[1], head[2] - 0.06],
+        [0.9, head[1] + 0.06, head[2] + 0.06],
+        panto,
+    );
+}
+
 pub fn train(rng: &mut Lcg) -> (Builder, String) {
     let mut b = Builder::default();
     let tram = rng.chance(0.5);
@@ -794,39 +919,9 @@ pub fn train(rng: &mut Lcg) -> (Builder, String) {
             }
             openings.material(local, band, side)
         });
-        for f in [0.17f32, 0.83] {
-            let c = z0 + car_len * f;
-            b.cuboid([-1.0, 0.25, c - 1.3], [1.0, floor - 0.02, c + 1.3], bogie);
-            for dz in [-0.9, 0.9] {
-                for side in [-1.0, 1.0] {
-                    wheel(&mut b, [side * 0.72, 0.42, c + dz], 0.42, 0.14, rim_m);
-                }
-            }
-        }
+        bogies(&mut b, (z0, car_len), floor, (bogie, rim_m));
         if i == 0 {
-            let panto = b.material("pantograph", [60, 60, 64]);
-            let base_z = z0 + car_len * 0.35;
-            b.cuboid(
-                [-0.6, height, base_z - 0.8],
-                [0.6, height + 0.18, base_z + 0.8],
-                panto,
-            );
-            let knee = [0.0, height + 0.95, base_z + 0.7];
-            b.beam(
-                [0.0, height + 0.18, base_z - 0.6],
-                knee,
-                0.04,
-                0.5,
-                [1.0, 0.0, 0.0],
-                panto,
-            );
-            let head = [0.0, height + 1.6, base_z - 0.2];
-            b.beam(knee, head, 0.03, 0.45, [1.0, 0.0, 0.0], panto);
-            b.cuboid(
-                [-0.9, head[1], head[2] - 0.06],
-                [0.9, head[1] + 0.06, head[2] + 0.06],
-                panto,
-            );
+            pantograph(&mut b, z0 + car_len * 0.35, height);
         }
         z0 = z1 + gap;
         if i + 1 < cars {

@@ -23,7 +23,53 @@ fn las_problem(e: las::Error) -> Problem {
     }
 }
 
+/// Refuses a LAZ file whose chunk table claims more chunks than the file has bytes: the laz
+/// crate sizes a table for the claimed count (up to 2³² entries, 64 GiB) before decoding it.
+/// Anything else odd is left for the las crate to report.
+fn check_chunk_table(path: &Path) -> Result<(), Problem> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(path)?;
+    let size = file.metadata()?.len();
+    let mut header = [0u8; 105];
+    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" {
+        return Ok(());
+    }
+    // LASzip marks compressed point formats with the top bit.
+    if header[104] & 0x80 == 0 {
+        return Ok(());
+    }
+    let data_start = u64::from(u32::from_le_bytes([
+        header[96], header[97], header[98], header[99],
+    ]));
+    let mut word = [0u8; 8];
+    let mut read_at =
+        |at: SeekFrom, bytes: &mut [u8]| file.seek(at).and_then(|_| file.read_exact(bytes)).is_ok();
+    if !read_at(SeekFrom::Start(data_start), &mut word) {
+        return Ok(());
+    }
+    // A writer that could not seek back leaves the table's offset at the end of the file.
+    let mut table = i64::from_le_bytes(word);
+    if table <= data_start as i64 {
+        if !read_at(SeekFrom::End(-8), &mut word) {
+            return Ok(());
+        }
+        table = i64::from_le_bytes(word);
+    }
+    let mut count = [0u8; 4];
+    if table <= data_start as i64 || !read_at(SeekFrom::Start(table as u64 + 4), &mut count) {
+        return Ok(());
+    }
+    let chunks = u32::from_le_bytes(count);
+    if u64::from(chunks) > size {
+        return Err(Problem::Malformed(format!(
+            "LAZ chunk table declares {chunks} chunks, more than the file's {size} bytes hold"
+        )));
+    }
+    Ok(())
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
+    check_chunk_table(path)?;
     let file = std::fs::File::open(path)?;
     let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
     let header = reader.header().clone();

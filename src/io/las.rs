@@ -68,8 +68,42 @@ fn check_chunk_table(path: &Path) -> Result<(), Problem> {
     Ok(())
 }
 
+/// Refuses a LAS 1.4 file whose extended VLRs claim more bytes than the file holds: the las
+/// crate allocates an EVLR's claimed length (a u64) before reading it.
+fn check_evlrs(path: &Path) -> Result<(), Problem> {
+    use std::io::{Read, Seek, SeekFrom};
+    const EVLR_HEADER: u64 = 60;
+    let mut file = std::fs::File::open(path)?;
+    let size = file.metadata()?.len();
+    let mut header = [0u8; 247];
+    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" || header[25] < 4 {
+        return Ok(());
+    }
+    let u64_at =
+        |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("eight bytes"));
+    let mut at = u64_at(&header, 235);
+    let count = u32::from_le_bytes([header[243], header[244], header[245], header[246]]);
+    let mut evlr = [0u8; EVLR_HEADER as usize];
+    for k in 0..count {
+        if file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut evlr).is_err() {
+            return Ok(());
+        }
+        let length = u64_at(&evlr, 20);
+        let end = at.saturating_add(EVLR_HEADER).saturating_add(length);
+        if end > size {
+            return Err(Problem::Malformed(format!(
+                "extended VLR {} declares {length} bytes past the end of the file",
+                k + 1
+            )));
+        }
+        at = end;
+    }
+    Ok(())
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     check_chunk_table(path)?;
+    check_evlrs(path)?;
     let file = std::fs::File::open(path)?;
     let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
     let header = reader.header().clone();

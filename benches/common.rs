@@ -1,10 +1,10 @@
 //! Inputs shared by the benches (each bench compiles this module and uses part of it): the largest real MLS car of the reference set when it is
 //! present, a generated car of the same size otherwise.
 
-use mvpcc::cloud::PointCloud;
-use mvpcc::frame::{Frame, UpAxis};
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::core::frame::{Frame, UpAxis};
+use mvpcc::datagen::shapes;
 use mvpcc::io::read_cloud;
-use mvpcc::shapes;
 use std::path::PathBuf;
 
 /// A normalized car scan of about 35K points, and where it came from.

@@ -2,9 +2,9 @@
 //! complete with the built-in models, write; and the parts users can switch off.
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::{Completer, Method, Options, Settings};
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
-use mvpcc::orient::OrientMode;
 use std::time::Duration;
 
 mod common;

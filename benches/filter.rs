@@ -1,5 +1,5 @@
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::filter::{inliers, SorParams};
+use mvpcc::complete::filter::{inliers, SorParams};
 use std::time::Duration;
 
 mod common;

@@ -1,6 +1,6 @@
 use criterion::{criterion_group, criterion_main, Criterion};
+use mvpcc::core::rng::Lcg;
 use mvpcc::metrics::compare_clouds;
-use mvpcc::shapes::Lcg;
 
 mod common;
 

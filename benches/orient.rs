@@ -1,8 +1,8 @@
 use burn::tensor::Device;
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::clean::clean;
-use mvpcc::frame::UpAxis;
-use mvpcc::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::complete::clean::clean;
+use mvpcc::complete::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::core::frame::UpAxis;
 use std::time::Duration;
 
 mod common;

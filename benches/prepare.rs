@@ -2,14 +2,14 @@
 //! for 20 samples × 4 views at 256², ground truth at 512², on 2 cores).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::camera::{Camera, DEFAULT_VIEWS};
-use mvpcc::data::{prepare_model, CloudPolicy, Layout, PrepareParams, Source};
-use mvpcc::mesh::{write_obj, SignedAxis};
-use mvpcc::projection::project;
-use mvpcc::raster::render_views;
-use mvpcc::scan::{ground_truth, partial, scan, PartialParams, PartialSpec};
-use mvpcc::shapes::Lcg;
-use mvpcc::synth::{synthesize, Category};
+use mvpcc::core::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::core::rng::Lcg;
+use mvpcc::datagen::data::{prepare_model, CloudPolicy, Layout, PrepareParams, Source};
+use mvpcc::datagen::mesh::{write_obj, SignedAxis};
+use mvpcc::datagen::raster::render_views;
+use mvpcc::datagen::scan::{ground_truth, partial, scan, PartialParams, PartialSpec};
+use mvpcc::datagen::synth::{synthesize, Category};
+use mvpcc::views::projection::project;
 use mvpcc::views::write_views;
 
 fn stages(c: &mut Criterion) {

@@ -1,6 +1,6 @@
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::camera::{Camera, DEFAULT_VIEWS};
-use mvpcc::projection::project;
+use mvpcc::core::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::views::projection::project;
 
 mod common;
 

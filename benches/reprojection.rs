@@ -1,8 +1,8 @@
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use mvpcc::camera::{Camera, DEFAULT_VIEWS};
-use mvpcc::filter::{inliers, SorParams};
-use mvpcc::projection::project;
-use mvpcc::reprojection::{reproject, snap_to_rays, ReprojectOptions};
+use mvpcc::complete::filter::{inliers, SorParams};
+use mvpcc::core::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::views::projection::project;
+use mvpcc::views::reprojection::{reproject, snap_to_rays, ReprojectOptions};
 
 mod common;
 

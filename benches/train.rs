@@ -7,11 +7,12 @@
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::Device;
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::core::camera::{Camera, DEFAULT_VIEWS};
+use mvpcc::core::rng::Lcg;
+use mvpcc::datagen::shapes::example_car_views;
 use mvpcc::model::gan::{Batch, Gan, GanOptimConfig};
 use mvpcc::model::loss::{smooth_l1, LossWeights};
 use mvpcc::model::Preset;
-use mvpcc::shapes::{example_car_views, Lcg};
 use mvpcc::train::dataset::{load_sample, AugmentSettings, Cache, SampleRef};
 use mvpcc::views::write_views;
 use std::time::Duration;

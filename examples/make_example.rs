@@ -3,8 +3,8 @@
 //!
 //! `cargo run --example make_example` regenerates both files bit for bit.
 
+use mvpcc::datagen::shapes::{example_car, scanned_side};
 use mvpcc::io::{write_cloud, Encoding};
-use mvpcc::shapes::{example_car, scanned_side};
 use std::path::Path;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

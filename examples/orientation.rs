@@ -11,18 +11,18 @@
 //! [--limit N] [--orienter FILE] [--model FILE] [--headings-only]`
 
 use burn::tensor::Device;
-use mvpcc::clean::clean;
-use mvpcc::cloud::PointCloud;
+use mvpcc::complete::clean::clean;
+use mvpcc::complete::orient::{angle_between, orient, OrientMode, Orienter, DEFAULT_ORIENTER};
 use mvpcc::complete::{Completer, Options, Settings, DEFAULT_MODEL};
-use mvpcc::data::{Layout, Manifest, TEST};
-use mvpcc::frame::{Frame, UpAxis};
-use mvpcc::inpaint::Inpainter;
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::core::frame::{Frame, UpAxis};
+use mvpcc::core::rng::Lcg;
+use mvpcc::datagen::data::{Layout, Manifest, TEST};
+use mvpcc::datagen::scan::PartialSpec;
 use mvpcc::io::read_cloud;
 use mvpcc::metrics::compare_clouds;
-use mvpcc::orient::train::OrientScores;
-use mvpcc::orient::{angle_between, orient, OrientMode, Orienter, DEFAULT_ORIENTER};
-use mvpcc::scan::PartialSpec;
-use mvpcc::shapes::Lcg;
+use mvpcc::model::inpaint::Inpainter;
+use mvpcc::train::orient::OrientScores;
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
 

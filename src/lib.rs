@@ -1,41 +1,26 @@
 //! mvpcc: multi-view point cloud completion (MVPCC-Net) for mobile laser scans.
 //!
-//! The pipeline stages are modules of their own: [`io`] reads and writes clouds, [`frame`] maps a
-//! cloud into the unit box and back, [`camera`] and [`projection`] turn it into view images,
-//! [`views`] stores those images in the original dataset's PNG layout, [`reprojection`] and
-//! [`filter`] turn views back into a cloud, and [`metrics`] scores the result. [`model`] is the
-//! inpainting network, [`inpaint`] runs it on view images and [`device`] picks where it runs.
-//! Training data comes from meshes ([`mesh`], [`synth`]): [`raster`] renders them, [`scan`]
-//! samples ground truth and partial scans, and [`data`] writes the dataset; [`train`] trains the
-//! network on it. [`complete`] is the whole pipeline a user runs, with [`clean`] removing what
-//! segmentation left around the vehicle, [`orient`] finding which way it faces, [`symmetry`]
-//! finding its plane of symmetry and [`preview`] drawing the result.
+//! The folders are the layers, each using only those listed before it:
+//!
+//! - [`core`]: point clouds, nearest neighbours, the unit-box frame, the camera rig, seeded
+//!   randomness.
+//! - [`io`]: cloud formats (PLY, PCD, LAS/LAZ, XYZ), atomic writes, file lists and shards for
+//!   batches.
+//! - [`metrics`]: Chamfer distances, F-scores and image metrics.
+//! - [`views`]: projection into view images, the dataset's PNG layout, re-projection.
+//! - [`model`]: the inpainting GAN, its weights files, running it on views ([`model::inpaint`])
+//!   and choosing the device ([`model::device`]).
+//! - [`complete`]: the completion pipeline a user runs, with its stages: cleaning, orientation,
+//!   symmetry, outlier filter, merge and preview.
+//! - [`datagen`]: training data from meshes or procedural vehicles: reading meshes,
+//!   rasterizing, ground truth and partial scans, the dataset layout.
+//! - [`train`]: training the GAN and the orientation network.
 
-pub mod batch;
-pub mod camera;
-pub mod clean;
-pub mod cli;
-pub mod cloud;
-pub mod commands;
 pub mod complete;
-pub mod data;
-pub mod device;
-pub mod filter;
-pub mod frame;
-pub mod inpaint;
+pub mod core;
+pub mod datagen;
 pub mod io;
-pub mod knn;
-pub mod mesh;
 pub mod metrics;
 pub mod model;
-pub mod orient;
-pub mod preview;
-pub mod projection;
-pub mod raster;
-pub mod reprojection;
-pub mod scan;
-pub mod shapes;
-pub mod symmetry;
-pub mod synth;
 pub mod train;
 pub mod views;

@@ -1,10 +1,12 @@
+mod cli;
+
 use clap::Parser;
-use mvpcc::cli::Cli;
+use cli::args::Cli;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match mvpcc::commands::run(cli) {
+    match cli::commands::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             let message = format!("{e:#}").replace('\n', " ");

@@ -4,7 +4,7 @@
 //! PoinTr's un-halved `cd_l2`; precision, recall and F1 at thresholds τ with a strict `<`. Colour on view
 //! images: PSNR, SSIM and MAE.
 
-use crate::knn::knn_distances;
+use crate::core::knn::knn_distances;
 use serde::Serialize;
 
 /// Precision, recall and F1 at one threshold.
@@ -331,7 +331,7 @@ mod tests {
 
     #[test]
     fn farthest_point_sampling_with_a_grid_equals_the_plain_definition() {
-        let mut rng = crate::shapes::Lcg::new(3);
+        let mut rng = crate::core::rng::Lcg::new(3);
         let points: Vec<[f64; 3]> = (0..3000)
             .map(|_| [rng.next_f64(), rng.next_f64() * 0.3, rng.next_f64() * 2.0])
             .collect();

@@ -2,10 +2,10 @@
 //! input giving one `error:` line naming the file, a non-zero exit and no output file.
 
 use assert_cmd::Command;
-use mvpcc::cloud::PointCloud;
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::datagen::shapes;
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
 use mvpcc::metrics::compare_clouds;
-use mvpcc::shapes;
 use predicates::prelude::*;
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;

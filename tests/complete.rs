@@ -4,11 +4,11 @@
 
 use assert_cmd::Command;
 use burn::tensor::Device;
-use mvpcc::cloud::{PointCloud, SYNTHETIC};
+use mvpcc::core::cloud::{PointCloud, SYNTHETIC};
+use mvpcc::datagen::shapes;
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
 use mvpcc::model::weights::generator_to_bytes;
 use mvpcc::model::Preset;
-use mvpcc::shapes;
 use predicates::prelude::*;
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;

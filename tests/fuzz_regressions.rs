@@ -3,7 +3,7 @@
 //! must now be refused with an error.
 
 use burn::tensor::Device;
-use mvpcc::mesh::{read_mesh, ReadOptions};
+use mvpcc::datagen::mesh::{read_mesh, ReadOptions};
 use std::path::{Path, PathBuf};
 
 /// Splits at the first `\n%%\n`, as the fuzz targets do for a file and its companion.
@@ -60,7 +60,7 @@ fn refused(target: &str, data: &[u8]) -> bool {
         }
         "weights" => {
             mvpcc::model::weights::generator_from_bytes(data, &Device::flex()).is_err()
-                && mvpcc::orient::Orienter::from_bytes(data, Device::flex()).is_err()
+                && mvpcc::complete::orient::Orienter::from_bytes(data, Device::flex()).is_err()
         }
         "run_files" => mvpcc::views::ViewsInfo::from_json(data).is_err(),
         other => panic!("no fuzz target {other}"),

@@ -3,7 +3,7 @@
 
 #![cfg(unix)]
 
-use mvpcc::cloud::PointCloud;
+use mvpcc::core::cloud::PointCloud;
 use mvpcc::io::{write_cloud, Encoding};
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
@@ -232,7 +232,7 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
     let dir = TempDir::new().unwrap();
     let d = dir.path();
     let input = d.join("car.ply");
-    let car = mvpcc::shapes::scanned_side(&mvpcc::shapes::car(3000, 1));
+    let car = mvpcc::datagen::shapes::scanned_side(&mvpcc::datagen::shapes::car(3000, 1));
     write_cloud(&input, &car, None, Encoding::Binary).unwrap();
     let out = d.join("out.ply");
     let garbage: Vec<u8> = (0..4096u32)

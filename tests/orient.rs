@@ -4,11 +4,11 @@
 
 use assert_cmd::Command;
 use burn::tensor::Device;
-use mvpcc::cloud::{PointCloud, SYNTHETIC};
+use mvpcc::complete::orient::angle_between;
+use mvpcc::complete::orient::OrienterConfig;
+use mvpcc::core::cloud::{PointCloud, SYNTHETIC};
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
-use mvpcc::orient::angle_between;
-use mvpcc::orient::train::{train_orienter, OrientData, OrientSettings, OrientTrainError};
-use mvpcc::orient::OrienterConfig;
+use mvpcc::train::orient::{train_orienter, OrientData, OrientSettings, OrientTrainError};
 use predicates::prelude::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

@@ -3,7 +3,7 @@
 //! half of an input `GLTF \n%%\n BIN`).
 
 use libfuzzer_sys::fuzz_target;
-use mvpcc::mesh::{read_mesh, ReadOptions};
+use mvpcc::datagen::mesh::{read_mesh, ReadOptions};
 
 fuzz_target!(|data: &[u8]| {
     let options = ReadOptions {

@@ -3,7 +3,7 @@
 //! the fuzzer finds `mtllib m.mtl`.
 
 use libfuzzer_sys::fuzz_target;
-use mvpcc::mesh::{read_mesh, ReadOptions};
+use mvpcc::datagen::mesh::{read_mesh, ReadOptions};
 
 fuzz_target!(|data: &[u8]| {
     let (obj, mtl) = mvpcc_fuzz::halves(data);

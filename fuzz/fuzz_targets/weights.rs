@@ -5,7 +5,7 @@
 use burn::tensor::Device;
 use libfuzzer_sys::fuzz_target;
 use mvpcc::model::weights::{discriminator_from_bytes, generator_from_bytes, read_config, Network};
-use mvpcc::orient::Orienter;
+use mvpcc::complete::orient::Orienter;
 
 fuzz_target!(|data: &[u8]| {
     let device = Device::flex();

@@ -3,7 +3,7 @@
 //! (the [`SYNTHETIC`] attribute).
 
 use super::{check_points, Problem};
-use crate::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
+use crate::core::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};

@@ -1,12 +1,13 @@
 //! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
 //! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it.
 
+pub mod batch;
 mod las;
 mod pcd;
 pub(crate) mod ply;
 mod xyz;
 
-use crate::cloud::PointCloud;
+use crate::core::cloud::PointCloud;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -148,6 +149,15 @@ pub struct Loaded {
 }
 
 /// Reads a cloud; the format comes from the extension unless `format` is given.
+///
+/// ```
+/// use mvpcc::io::read_cloud;
+/// use std::path::Path;
+///
+/// let loaded = read_cloud(Path::new("assets/example/car_partial.ply"), None)?;
+/// assert!(loaded.cloud.len() > 1000 && loaded.cloud.colors.is_some());
+/// # Ok::<(), mvpcc::io::CloudIoError>(())
+/// ```
 pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIoError> {
     let err = |problem| CloudIoError::new(path, problem);
     let format = match format {
@@ -281,7 +291,7 @@ fn fits_f32(cloud: &PointCloud) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cloud::{Attribute, ScalarKind};
+    use crate::core::cloud::{Attribute, ScalarKind};
 
     fn colored_cloud(georeferenced: bool) -> PointCloud {
         let base = if georeferenced {
@@ -373,7 +383,11 @@ mod tests {
                 back.attribute("classification"),
                 cloud.attribute("classification")
             );
-            assert_eq!(back.attribute(crate::cloud::SYNTHETIC), None, "no flag set");
+            assert_eq!(
+                back.attribute(crate::core::cloud::SYNTHETIC),
+                None,
+                "no flag set"
+            );
             // Written again, the file keeps the scale and offset it was read with.
             let again = round_trip(ext, Encoding::Binary, &back);
             assert_eq!(again.quantization, back.quantization);
@@ -404,14 +418,16 @@ mod tests {
     fn las_carries_the_synthetic_flag() {
         let mut cloud = colored_cloud(true);
         let flags: Vec<f64> = (0..cloud.len()).map(|i| (i % 2) as f64).collect();
-        cloud.attributes.push(crate::cloud::Attribute {
-            name: crate::cloud::SYNTHETIC.into(),
-            kind: crate::cloud::ScalarKind::U8,
+        cloud.attributes.push(crate::core::cloud::Attribute {
+            name: crate::core::cloud::SYNTHETIC.into(),
+            kind: crate::core::cloud::ScalarKind::U8,
             values: flags.clone(),
         });
         let back = round_trip("las", Encoding::Binary, &cloud);
         assert_eq!(
-            back.attribute(crate::cloud::SYNTHETIC).unwrap().values,
+            back.attribute(crate::core::cloud::SYNTHETIC)
+                .unwrap()
+                .values,
             flags
         );
     }

@@ -2,7 +2,7 @@
 //! bits 0x00RRGGBB: the bits are reinterpreted, never the float value converted.
 
 use super::{check_points, fits_f32, Encoding, Problem};
-use crate::cloud::{Attribute, PointCloud, ScalarKind};
+use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
 use std::io::Write;
 use std::path::Path;
 

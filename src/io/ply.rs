@@ -1,7 +1,7 @@
 //! PLY (ascii, binary little and big endian) through ply-rs-bw; bodies are written directly.
 
 use super::{check_points, fits_f32, Encoding, Problem};
-use crate::cloud::{Attribute, PointCloud, ScalarKind};
+use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
 use std::io::{BufReader, Write};

@@ -2,7 +2,7 @@
 //! non-numeric header line are skipped.
 
 use super::{max_points, Problem};
-use crate::cloud::PointCloud;
+use crate::core::cloud::PointCloud;
 use std::io::Write;
 use std::path::Path;
 

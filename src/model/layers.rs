@@ -117,7 +117,7 @@ impl Formulation {
     /// Whether layers running on `device` use the sliced formulation.
     fn sliced_on(device: &Device) -> bool {
         match Formulation::current() {
-            Formulation::Auto => crate::device::is_cpu(device),
+            Formulation::Auto => crate::model::device::is_cpu(device),
             Formulation::Sliced => true,
             Formulation::Plain => false,
         }

@@ -7,9 +7,11 @@
 //! model has it, and the input's occupancy mask; empty pixels are zero. It leaves as `channels`
 //! planes in [0, 1] plus an occupancy logit.
 
+pub mod device;
 mod discriminator;
 pub mod gan;
 mod generator;
+pub mod inpaint;
 mod layers;
 pub mod loss;
 pub mod vgg;
@@ -99,7 +101,7 @@ pub struct ModelConfig {
 pub enum Preset {
     /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
     Paper,
-    /// The CPU default, chosen by measurement (see README): w 56, r 6, S 128, zero padding,
+    /// The CPU default, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero padding,
     /// the largest measured shape whose whole `complete` stays within a second on two cores.
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
@@ -154,7 +156,7 @@ const LIMITS: [(&str, usize); 5] = [
     ("discriminator width", 1024),
     ("residual blocks", 64),
     ("image size", crate::views::MAX_VIEW_SIZE as usize),
-    ("views", crate::camera::RIG_SIZE),
+    ("views", crate::core::camera::RIG_SIZE),
 ];
 
 impl ModelConfig {

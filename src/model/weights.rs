@@ -21,7 +21,7 @@ const KEY_CONFIG: &str = "mvpcc.model_config";
 pub enum Network {
     Generator,
     Discriminator,
-    /// The orientation network ([`crate::orient::Orienter`]).
+    /// The orientation network ([`crate::complete::orient::Orienter`]).
     Orienter,
 }
 

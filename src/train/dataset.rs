@@ -3,11 +3,11 @@
 //! occupied-pixel lists (cached within a memory budget) and rendered at the model's image size,
 //! optionally through a geometric augmentation.
 
-use crate::camera::Camera;
-use crate::data::GT_FINE;
+use crate::core::camera::Camera;
+use crate::core::rng::{derive_seed, Lcg};
+use crate::datagen::data::GT_FINE;
 use crate::io::read_cloud;
-use crate::projection::{project, ViewImages, CHANNELS};
-use crate::shapes::{derive_seed, Lcg};
+use crate::views::projection::{project, ViewImages, CHANNELS};
 use crate::views::{read_views, ViewError};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -457,7 +457,7 @@ impl DrawOrder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shapes::example_car_views;
+    use crate::datagen::shapes::example_car_views;
     use crate::views::write_views;
 
     #[test]
@@ -469,7 +469,7 @@ mod tests {
         for (a, b) in views.pixels.iter().zip(&back.pixels) {
             assert!((a - b).abs() <= 0.5 / 255.0 + 1e-6, "{a} vs {b}");
         }
-        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, 64).unwrap();
+        let cameras = Camera::set(&crate::core::camera::DEFAULT_VIEWS, 64).unwrap();
         assert_eq!(render(&decoded, &cameras, &Augment::NONE), back);
     }
 
@@ -478,7 +478,7 @@ mod tests {
         // A 2×2 block of the full-size image maps onto one pixel of the half-size one, so the
         // re-projected views cover what projecting the cloud at half size covers.
         let full = Decoded::from_images(&example_car_views(128));
-        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, 64).unwrap();
+        let cameras = Camera::set(&crate::core::camera::DEFAULT_VIEWS, 64).unwrap();
         let half = render(&full, &cameras, &Augment::NONE);
         let direct = example_car_views(64);
         let (a, b) = (half.occupied(), direct.occupied());
@@ -497,7 +497,7 @@ mod tests {
         // the column-flipped original seen by its partner across x = 0.
         let views = example_car_views(64);
         let decoded = Decoded::from_images(&views);
-        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, 64).unwrap();
+        let cameras = Camera::set(&crate::core::camera::DEFAULT_VIEWS, 64).unwrap();
         let mirror = Augment {
             mirror: true,
             ..Augment::NONE
@@ -618,7 +618,7 @@ mod tests {
         let split = scan_split(&root, "train").unwrap();
         assert_eq!(split.samples.len(), 1);
         assert_eq!(split.samples[0].category, "02924116");
-        let cameras = Camera::set(&crate::camera::DEFAULT_VIEWS, 128).unwrap();
+        let cameras = Camera::set(&crate::core::camera::DEFAULT_VIEWS, 128).unwrap();
         let cache = Cache::new(1 << 30);
         let sample = load_sample(&split.samples[0], &cameras, &Augment::NONE, &cache).unwrap();
         assert_eq!((sample.target.size, sample.target.views()), (128, 4));

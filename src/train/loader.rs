@@ -3,9 +3,9 @@
 //! `prefetch` steps ahead.
 
 use super::dataset::{load_sample, AugmentSettings, Cache, DataError, DrawOrder, SampleRef};
-use crate::camera::Camera;
-use crate::inpaint::{encode_input, encode_target};
+use crate::core::camera::Camera;
 use crate::model::gan::Batch;
+use crate::model::inpaint::{encode_input, encode_target};
 use crate::model::loss::Target;
 use crate::model::Channels;
 use burn::tensor::{Device, Tensor, TensorData};

@@ -7,13 +7,14 @@
 pub mod checkpoint;
 pub mod dataset;
 pub mod loader;
+pub mod orient;
 pub mod plot;
 mod session;
 pub mod validate;
 
-use crate::inpaint::Inpainter;
 use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
+use crate::model::inpaint::Inpainter;
 use crate::model::loss::LossWeights;
 use crate::model::{weights, ModelConfig};
 use burn::module::Module;

@@ -3,7 +3,7 @@
 //! for every view).
 
 use super::validate::tile;
-use crate::projection::ViewImages;
+use crate::views::projection::ViewImages;
 use image::{Rgb, RgbImage};
 
 const WHITE: Rgb<u8> = Rgb([255, 255, 255]);

@@ -9,7 +9,7 @@ use super::{
     advance_on_validation, io_err, samples, write_json, Interval, Job, LogRecord, Monitor, Outcome,
     RunLog, Summary, TrainError, Validator, CONFIG_FILE, SETTINGS_FILE,
 };
-use crate::camera::Camera;
+use crate::core::camera::Camera;
 use crate::io::atomic_write;
 use crate::model::gan::Gan;
 use crate::model::vgg::Vgg19;

@@ -4,12 +4,12 @@
 //! against the ground-truth cloud.
 
 use super::dataset::{gt_cloud, load_sample, Augment, Cache, DataError, SampleRef};
-use crate::camera::Camera;
-use crate::filter::{inliers, SorParams};
-use crate::inpaint::Inpainter;
+use crate::complete::filter::{inliers, SorParams};
+use crate::core::camera::Camera;
 use crate::metrics::{compare_clouds, compare_images, ImageMetrics};
-use crate::projection::ViewImages;
-use crate::reprojection::{reproject, ReprojectOptions};
+use crate::model::inpaint::Inpainter;
+use crate::views::projection::ViewImages;
+use crate::views::reprojection::{reproject, ReprojectOptions};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

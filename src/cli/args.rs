@@ -1,0 +1,712 @@
+//! Command-line definitions (clap derive). Each subcommand's arguments live beside the others
+//! here; what they do lives in [`crate::cli::commands`].
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use mvpcc::complete::orient::OrientMode;
+use mvpcc::complete::Method;
+use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
+use mvpcc::core::frame::UpAxis;
+use mvpcc::datagen::data::CloudPolicy;
+use mvpcc::datagen::mesh::SignedAxis;
+use mvpcc::datagen::scan::PartialKinds;
+use mvpcc::datagen::synth::Category;
+use mvpcc::io::batch::Shard;
+use mvpcc::io::{Encoding, Format};
+use mvpcc::model::device::DeviceChoice;
+use mvpcc::model::loss::Adversarial;
+use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
+use std::path::PathBuf;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "mvpcc",
+    version,
+    about = "Multi-view point cloud completion (MVPCC-Net) for mobile laser scans of street objects"
+)]
+pub struct Cli {
+    /// Print nothing but errors and results.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Complete a partial scan: the measured points are kept and the missing surface is added
+    /// (flagged `synthetic`), in the input's coordinates. The default model is built in.
+    Complete(Box<CompleteArgs>),
+    /// Score predicted clouds against ground truth (Chamfer distances, F-score), or predicted
+    /// view images against ground-truth views (PSNR, SSIM, MAE).
+    Eval(EvalArgs),
+    /// Normalize a cloud and project it into view images (the original dataset's PNG pairs).
+    Project(ProjectArgs),
+    /// Turn view images back into a cloud: erode, merge, de-duplicate, remove outliers.
+    Reproject(ReprojectArgs),
+    /// Statistical outlier removal (PCL's StatisticalOutlierRemoval) as a tool of its own.
+    Filter(FilterArgs),
+    /// Time the network's forward pass on random input, by layer kind.
+    Profile(ProfileArgs),
+    /// Make training data from meshes: ground truth, partial scans and their view images in
+    /// the original dataset's layout.
+    Prepare(PrepareArgs),
+    /// Generate street-object meshes (cars, buses, trucks, trains, motorcycles) as OBJ + MTL.
+    Synth(SynthArgs),
+    /// Train the inpainting GAN on a "shapenet-views" directory (from `mvpcc prepare` or the
+    /// original MVPCC data).
+    Train(Box<TrainArgs>),
+    /// Train the orientation network (the paper's STN) on the partial samples of a
+    /// "shapenet-views" directory turned by random yaws.
+    TrainOrient(TrainOrientArgs),
+}
+
+/// How an input file is read.
+#[derive(Debug, Args)]
+pub struct InputOptions {
+    /// Input format, overriding the file extension.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+}
+
+/// How an output cloud is written.
+#[derive(Debug, Args)]
+pub struct OutputOptions {
+    /// Output format, overriding the file extension.
+    #[arg(long, value_enum)]
+    pub out_format: Option<Format>,
+    /// Body encoding for PLY and PCD outputs.
+    #[arg(long, value_enum, default_value_t = Encoding::Binary)]
+    pub encoding: Encoding,
+}
+
+#[derive(Debug, Args)]
+pub struct SorOptions {
+    /// Neighbours per point for the outlier filter, excluding the point itself (PCL's mean_k;
+    /// Open3D's nb_neighbors is this + 1). 0 turns the filter off.
+    #[arg(long, default_value_t = 20)]
+    pub sor_k: usize,
+    /// Points whose mean neighbour distance exceeds mean + this × std are removed.
+    #[arg(long, default_value_t = 5.0)]
+    pub sor_std: f64,
+}
+
+impl SorOptions {
+    pub fn params(&self) -> mvpcc::complete::filter::SorParams {
+        mvpcc::complete::filter::SorParams {
+            k: self.sor_k,
+            std_mul: self.sor_std,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Metric {
+    /// Chamfer distances: cd_l2_half (the paper's Eq. 5, squared), cd_l1 (PCN; the scale the
+    /// paper's tables print, docs/paper.md), cd_l2 (PoinTr).
+    Cd,
+    /// Precision, recall and F1 at each --tau.
+    F1,
+    /// PSNR of view colours (needs --pred-views/--gt-views).
+    Psnr,
+    /// SSIM of view colours.
+    Ssim,
+    /// Mean absolute error of view colours.
+    Mae,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Normalize {
+    /// Coordinates as stored.
+    None,
+    /// Both clouds mapped by the ground truth's box: centred, longest side 1.
+    GtBox,
+}
+
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Metrics to compute.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "cd,f1")]
+    pub metrics: Vec<Metric>,
+    /// Predicted cloud.
+    #[arg(long, requires = "gt", conflicts_with_all = ["pred_dir", "pred_views"])]
+    pub pred: Option<PathBuf>,
+    /// Ground-truth cloud.
+    #[arg(long, requires = "pred")]
+    pub gt: Option<PathBuf>,
+    /// Directory of predicted clouds, matched to --gt-dir by file stem, or to --data's test
+    /// samples as CATEGORY/MODEL/partial_K.*.
+    #[arg(long, conflicts_with = "pred_views")]
+    pub pred_dir: Option<PathBuf>,
+    /// A data directory from `mvpcc prepare`: score --pred-dir's completions of its test
+    /// partials against their ground truth (scanner partials turned back into the object's
+    /// frame), with means per category and per partial protocol.
+    #[arg(long, requires = "pred_dir", conflicts_with = "gt_dir")]
+    pub data: Option<PathBuf>,
+    /// With --data: the fine ground truth (gt.ply, every point the rig saw) or the paper's
+    /// coarse one (gt_coarse.ply: 16,384 of them by farthest point sampling; computed when an
+    /// older data directory lacks it).
+    #[arg(long, value_enum, default_value_t = GroundTruth::Fine, requires = "data")]
+    pub ground_truth: GroundTruth,
+    /// Directory of ground-truth clouds.
+    #[arg(long, requires = "pred_dir")]
+    pub gt_dir: Option<PathBuf>,
+    /// Directory of predicted view images (locations_NNN.png, color_NNN.png).
+    #[arg(long, requires = "gt_views")]
+    pub pred_views: Option<PathBuf>,
+    /// Directory of ground-truth view images.
+    #[arg(long, requires = "pred_views")]
+    pub gt_views: Option<PathBuf>,
+    /// F-score thresholds (strict <), in the clouds' units.
+    #[arg(long, value_delimiter = ',', default_value = "0.01,0.005")]
+    pub tau: Vec<f64>,
+    /// Coordinate normalization applied before scoring.
+    #[arg(long, value_enum, default_value_t = Normalize::None)]
+    pub normalize: Normalize,
+    /// Print results as JSON on stdout instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub input: InputOptions,
+}
+
+/// The decoded-sample cache of `train` and `train-orient`, MiB.
+const DEFAULT_CACHE_MB: usize = 2048;
+
+/// Which ground truth `eval --data` scores against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GroundTruth {
+    Fine,
+    Coarse,
+}
+
+/// A list of rig cameras as typed on the command line (`5,6,7,8`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ViewList(pub Vec<usize>);
+
+impl std::str::FromStr for ViewList {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        parse_view_set(text)
+            .map(ViewList)
+            .map_err(|e| e.to_string())
+    }
+}
+
+impl std::fmt::Display for ViewList {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let parts: Vec<String> = self.0.iter().map(|v| v.to_string()).collect();
+        f.write_str(&parts.join(","))
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct CompleteArgs {
+    /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ).
+    #[arg(required_unless_present_any = ["input_dir", "list"], conflicts_with_all = ["input_dir", "list"])]
+    pub input: Option<PathBuf>,
+    /// Completed cloud; its extension picks the format (the input's format when it names none).
+    #[arg(required_unless_present_any = ["input_dir", "list"])]
+    pub output: Option<PathBuf>,
+    /// Complete every cloud file under this directory (recursively; hidden files skipped, each
+    /// file once however many links lead to it).
+    #[arg(long, requires = "output_dir")]
+    pub input_dir: Option<PathBuf>,
+    /// Where batch results go, at the same relative paths (created if missing).
+    #[arg(long)]
+    pub output_dir: Option<PathBuf>,
+    /// Batch: complete the files this text file lists, one per line, relative to --input-dir
+    /// (or to the current directory without one) or absolute under --input-dir.
+    #[arg(long, requires = "output_dir")]
+    pub list: Option<PathBuf>,
+    /// Batch: only files whose name matches this pattern (`*` and `?` wildcards).
+    #[arg(long, requires = "input_dir", conflicts_with = "list")]
+    pub include: Option<String>,
+    /// Batch: take only part I of N (I from 0 to N-1), chosen by a hash of each file's relative
+    /// path, so N jobs with 0/N … N-1/N complete every file exactly once.
+    #[arg(long, value_name = "I/N", requires = "output_dir")]
+    pub shard: Option<Shard>,
+    /// Batch: leave files whose output already exists (outputs are written whole or not at
+    /// all, so an existing one is complete).
+    #[arg(long, requires = "output_dir")]
+    pub skip_existing: bool,
+    /// Batch: files completed at once.
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// network, or a baseline: identity (the partial as it is) or mirror (the partial and its
+    /// mirror image across the vehicle's long vertical plane).
+    #[arg(long, value_enum, default_value_t = Method::Network)]
+    pub method: Method,
+    /// Generator weights (a run's generator.safetensors, or its run directory) [default: the
+    /// built-in model].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// Rig cameras of the model's views (those it was trained with).
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Input's up axis [default: z for LAS/LAZ, y otherwise].
+    #[arg(long, value_enum)]
+    pub up: Option<UpAxis>,
+    /// Which way the vehicle faces: auto (the best measured estimator, see docs/orientation.md), geometric
+    /// (footprint rectangle + height heuristic), learned (the orientation network), combined
+    /// (rectangle axis, network's front), none (keep the input's axes), or the heading in
+    /// degrees (the front's direction, counter-clockwise from +x seen from above).
+    /// [default: auto; none with --paper]
+    #[arg(long, allow_negative_numbers = true)]
+    pub orient: Option<OrientMode>,
+    /// Orientation network weights (train-orient's orienter.safetensors) [default: built in].
+    #[arg(long)]
+    pub orienter: Option<PathBuf>,
+    /// Remove ground points (a plane fit under the object), isolated points and points of
+    /// other objects before completing; the counts are reported.
+    #[arg(long)]
+    pub clean: bool,
+    /// The paper's pipeline exactly, for its tables: the input's own box, projection into the
+    /// model's views, inpainting, 3×3 erosion, re-projection, outlier filter (k 20, σ 5), back
+    /// to the input's frame. No cleaning, no orientation unless --orient names one, no
+    /// symmetric frame, no mirror images, no snapping, the measured points not kept.
+    #[arg(long, conflicts_with_all = ["clean", "keep_input", "symmetry", "no_snap", "method"])]
+    pub paper: bool,
+    /// Write the network's input and inpainted views in the dataset's format (`DIR/input/`,
+    /// `DIR/output/`; with --input-dir, `DIR/<relative path without extension>/…`), for
+    /// `eval --pred-views/--gt-views`.
+    #[arg(long)]
+    pub save_views: Option<PathBuf>,
+    /// Keep the measured points and add completed points only where they are missing (the
+    /// default).
+    #[arg(long, overrides_with = "no_keep_input")]
+    pub keep_input: bool,
+    /// Output the network's re-projected cloud alone, as the paper does.
+    #[arg(long, overrides_with = "keep_input")]
+    pub no_keep_input: bool,
+    /// Also add the measured points' mirror images across the vehicle's plane of symmetry
+    /// (the default).
+    #[arg(long, overrides_with = "no_symmetry")]
+    pub symmetry: bool,
+    /// Let the network alone complete the far side.
+    #[arg(long, overrides_with = "symmetry")]
+    pub no_symmetry: bool,
+    /// Erosion element side for the inpainted views (pixels); 0 = off.
+    #[arg(long, default_value_t = 3)]
+    pub erode: usize,
+    /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub smooth: usize,
+    /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray
+    /// at the predicted depth.
+    #[arg(long)]
+    pub no_snap: bool,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    /// A completed point within this many model pixels of a measured one is not added.
+    #[arg(long, default_value_t = 4.0)]
+    pub merge_pixels: f64,
+    /// Write a PNG of input and output from three viewpoints, completed points tinted.
+    #[arg(long, conflicts_with = "output_dir")]
+    pub preview: Option<PathBuf>,
+    /// Print the time of each stage (the paper's Table 4 breakdown).
+    #[arg(long)]
+    pub timings: bool,
+    /// Print the results as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct ProjectArgs {
+    /// Input cloud (PLY, PCD, LAS/LAZ, XYZ).
+    pub input: PathBuf,
+    /// Directory for the view images and frame.json (created if missing).
+    pub outdir: PathBuf,
+    /// Rig cameras (1–20) to render.
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 256)]
+    pub size: usize,
+    /// Input's up axis [default: z for LAS/LAZ, y otherwise].
+    #[arg(long, value_enum)]
+    pub up: Option<UpAxis>,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct ReprojectArgs {
+    /// Directory of view images (as written by `mvpcc project`, or the original dataset's).
+    pub viewdir: PathBuf,
+    /// Output cloud.
+    pub output: PathBuf,
+    /// Rig cameras to use [default: every locations_NNN.png found].
+    #[arg(long)]
+    pub views: Option<ViewList>,
+    /// Erosion element side in pixels before re-projection; 0 = off. Meant for dense
+    /// (inpainted) views: it removes most of a raw sparse scan.
+    #[arg(long, default_value_t = 3)]
+    pub erode: usize,
+    /// Median window side over each view's XYZ before re-projection (pixels); 0 = off.
+    #[arg(long, default_value_t = 0)]
+    pub smooth: usize,
+    /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
+    #[arg(long, default_value_t = 1e-4)]
+    pub dedup: f64,
+    /// Write normalized coordinates even when the directory has a frame.json.
+    #[arg(long)]
+    pub normalized: bool,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct FilterArgs {
+    /// Input cloud.
+    pub input: PathBuf,
+    /// Output cloud (inliers, with all their attributes).
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub sor: SorOptions,
+    #[command(flatten)]
+    pub input_options: InputOptions,
+    #[command(flatten)]
+    pub output_options: OutputOptions,
+}
+
+#[derive(Debug, Args)]
+pub struct ProfileArgs {
+    /// Model shape (a preset; the options below override its fields).
+    #[arg(long, value_enum, default_value_t = Preset::Cpu)]
+    pub config: Preset,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// View image side in pixels.
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Channels after the first convolution.
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// Residual blocks in the encoder.
+    #[arg(long)]
+    pub res_blocks: Option<usize>,
+    #[arg(long)]
+    pub views: Option<usize>,
+    #[arg(long, value_enum)]
+    pub channels: Option<Channels>,
+    #[arg(long, value_enum)]
+    pub padding: Option<Padding>,
+    /// Objects per forward pass (per training step with --train).
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// Time whole GAN training steps (both networks' forward, backward and Adam updates, every
+    /// loss term) instead of the generator's forward.
+    #[arg(long)]
+    pub train: bool,
+    /// How layers with two formulations run: sliced on the CPU and plain elsewhere (auto), or
+    /// one of them everywhere, to measure one against the other.
+    #[arg(long, value_enum, default_value_t = Formulation::Auto)]
+    pub layers: Formulation,
+    /// Timed runs; the per-layer or per-phase breakdown takes as many more.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Untimed runs first: GPU autotuning benchmarks each new kernel shape in them.
+    #[arg(long, default_value_t = 2)]
+    pub warmup: usize,
+    /// Print the results as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl ProfileArgs {
+    pub fn model_config(&self) -> ModelConfig {
+        let mut c = self.config.config();
+        c.size = self.size.unwrap_or(c.size);
+        c.width = self.width.unwrap_or(c.width);
+        c.res_blocks = self.res_blocks.unwrap_or(c.res_blocks);
+        c.views = self.views.unwrap_or(c.views);
+        c.channels = self.channels.unwrap_or(c.channels);
+        c.padding = self.padding.unwrap_or(c.padding);
+        c
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct PrepareArgs {
+    /// Directory of meshes (OBJ+MTL, PLY, glTF/GLB), as DIR/CATEGORY/NAME.* or ShapeNet's
+    /// DIR/SYNSET/ID/models/model_normalized.obj.
+    #[arg(long, required_unless_present = "synth", conflicts_with = "synth")]
+    pub meshes: Option<PathBuf>,
+    /// Generate this many street objects into OUT/meshes first and prepare those.
+    #[arg(long)]
+    pub synth: Option<usize>,
+    /// Prepare only part I of N of the meshes (I from 0 to N-1, chosen by a hash of category
+    /// and name), so N jobs sharing OUT prepare each mesh once; a last run without --shard
+    /// finds them all prepared and writes the manifest.
+    #[arg(long, value_name = "I/N", requires = "meshes")]
+    pub shard: Option<Shard>,
+    #[command(flatten)]
+    pub synth_options: SynthOptions,
+    /// Output data directory (created if missing; an interrupted run resumes in it).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Fraction of models in the train split; the rest is test.
+    #[arg(long, default_value_t = 0.93)]
+    pub split: f64,
+    /// Partial samples per model.
+    #[arg(long, default_value_t = 20)]
+    pub samples: usize,
+    /// Rig cameras of the training views.
+    #[arg(long, default_value_t = ViewList(DEFAULT_VIEWS.to_vec()))]
+    pub views: ViewList,
+    /// Training view side in pixels.
+    #[arg(long, default_value_t = 256)]
+    pub size: usize,
+    /// Render size of the 20 rig cameras the ground truth is sampled with.
+    #[arg(long, default_value_t = 512)]
+    pub gt_size: usize,
+    /// Ground-truth voxel (normalized units): one point is kept per voxel.
+    #[arg(long, default_value_t = 1.0 / 256.0)]
+    pub gt_voxel: f32,
+    /// Which partial scans to make.
+    #[arg(long, value_enum, default_value_t = PartialKinds::Both)]
+    pub partial: PartialKinds,
+    /// Fewest points a partial is aimed at (drawn log-uniformly up to --max-points).
+    #[arg(long, default_value_t = 2_000)]
+    pub min_points: usize,
+    #[arg(long, default_value_t = 130_000)]
+    pub max_points: usize,
+    /// Largest angle (degrees) between the simulated scanner's path and the object's axis.
+    #[arg(long, default_value_t = 10.0)]
+    pub yaw_error: f32,
+    /// Largest range-noise standard deviation of the scanner (normalized units).
+    #[arg(long, default_value_t = 0.002)]
+    pub noise: f32,
+    /// The meshes' up axis (x, y, z, -x, -y, -z).
+    #[arg(long, default_value = "y", allow_hyphen_values = true)]
+    pub up: SignedAxis,
+    /// The axis the meshes' fronts point along (ShapeNet: -z).
+    #[arg(long, default_value = "-z", allow_hyphen_values = true)]
+    pub forward: SignedAxis,
+    /// Which partial clouds are written as PLY beside the views (gt.ply always is).
+    #[arg(long, value_enum, default_value_t = CloudPolicy::Test)]
+    pub clouds: CloudPolicy,
+    /// Use the material colour where an MTL file or a texture is missing, instead of skipping
+    /// the mesh.
+    #[arg(long)]
+    pub allow_missing_materials: bool,
+    /// Meshes with more triangles are skipped.
+    #[arg(long, default_value_t = 5_000_000)]
+    pub max_triangles: usize,
+    /// Print the run's summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Number of objects.
+    #[arg(long)]
+    pub count: usize,
+    /// Output directory; objects go to OUT/CATEGORY/CATEGORY_NNNNN.obj.
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub synth_options: SynthOptions,
+    /// Also write OUT/preview.png: the first 16 objects rendered from one camera.
+    #[arg(long)]
+    pub preview: bool,
+}
+
+/// What `synth` draws from, shared with `prepare --synth`.
+#[derive(Debug, Args)]
+pub struct SynthOptions {
+    /// Categories to draw from (with --synth; cars weighted 4:1 against each other category).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "car,bus,truck,train,motorcycle"
+    )]
+    pub category: Vec<Category>,
+    /// Seed of everything random: objects, samples, noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// `mvpcc train`. Options left out take their defaults on a new run and the run's saved
+/// values (train.json, config.json) on `--resume`, where giving a different value is an error
+/// for everything but the operational options (steps, device, workers, prefetch, cache, log
+/// interval, checkpoints kept).
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Data: DIR/GT/train/CATEGORY/MODEL/ with DIR/in/train/CATEGORY/MODEL/K/; GT/test
+    /// validates when present, else a share of the training models is held back.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run directory: checkpoints/, best/, generator.safetensors, log.jsonl, losses.png,
+    /// samples/ [default: runs/DATA, DATA the data directory's name].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Rig cameras the model sees [default: 5,6,7,8].
+    #[arg(long)]
+    pub views: Option<ViewList>,
+    /// Image channels the model reads and writes [default: xyzrgb].
+    #[arg(long, value_enum)]
+    pub channels: Option<Channels>,
+    /// Model shape: paper, default (the CPU preset), small, tiny, or a JSON file holding a
+    /// model config (as a run's config.json) [default: default].
+    #[arg(long)]
+    pub config: Option<String>,
+    /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Where the views meet: late (the bottleneck features, the paper's network) or early (the
+    /// input images, before the shared encoder; the paper's Table 6) [default: the config's].
+    #[arg(long, value_enum)]
+    pub fusion: Option<Fusion>,
+    /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
+    /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
+    /// a folder holding model.safetensors and discriminator.safetensors (as assets/). The model
+    /// config is the weights' own unless --config gives one; only --size may differ from it.
+    #[arg(long, conflicts_with = "resume")]
+    pub init: Option<PathBuf>,
+    /// The discriminator's weights to start from with --init, over the one --init finds.
+    #[arg(long, requires = "init")]
+    pub init_discriminator: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// Objects per micro-batch [default: 4].
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Micro-batches accumulated into one optimizer step [default: 1].
+    #[arg(long)]
+    pub accumulate: Option<usize>,
+    /// Stop after this many steps in all (a resumed run counts its earlier steps).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Continue the run in --out from its latest checkpoint.
+    #[arg(long)]
+    pub resume: bool,
+    /// Generator learning rate of the first stage; the second and third use 1/10 and 1/100 of
+    /// it [default: 1e-4].
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Most steps per stage [default: 100000].
+    #[arg(long)]
+    pub stage_steps: Option<u64>,
+    /// Validations without a better CD after which a stage ends [default: 5].
+    #[arg(long)]
+    pub patience: Option<usize>,
+    /// Steps between validations; 0 = never [default: 500].
+    #[arg(long)]
+    pub val_every: Option<u64>,
+    /// Validation samples (spread over the validation models) [default: 16].
+    #[arg(long)]
+    pub val_samples: Option<usize>,
+    /// Share of training models held back for validation when the data has no test split
+    /// [default: 0.05].
+    #[arg(long)]
+    pub val_fraction: Option<f64>,
+    /// Steps between checkpoints [default: 500].
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Checkpoints kept besides best/ [default: 3].
+    #[arg(long)]
+    pub keep: Option<usize>,
+    /// Steps between lines of log.jsonl [default: 10].
+    #[arg(long)]
+    pub log_every: Option<u64>,
+    /// Seed of initialization, sample order and augmentation [default: 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Do not mirror samples x ↔ −x.
+    #[arg(long)]
+    pub no_mirror: bool,
+    /// Largest random yaw of a sample, degrees; 0 = off [default: 5].
+    #[arg(long)]
+    pub max_yaw: Option<f32>,
+    /// Largest relative colour gain change; 0 = off [default: 0.1].
+    #[arg(long)]
+    pub color_jitter: Option<f32>,
+    /// torchvision's VGG19 weights (vgg19-dcbd0d2f.pth, or safetensors with its keys): the
+    /// perceptual and style terms then use VGG19 features as the paper does, instead of the
+    /// discriminator's.
+    #[arg(long)]
+    pub vgg19: Option<PathBuf>,
+    /// Weight of the smooth L1 term [default: 50, the original code's; so are the others].
+    #[arg(long)]
+    pub loss_l1: Option<f64>,
+    /// Weight of the adversarial term [default: 0.1].
+    #[arg(long)]
+    pub loss_adversarial: Option<f64>,
+    /// Weight of the perceptual term [default: 0.1; the paper's text: 250].
+    #[arg(long)]
+    pub loss_perceptual: Option<f64>,
+    /// Weight of the style term [default: 250; the paper's text: 0.1].
+    #[arg(long)]
+    pub loss_style: Option<f64>,
+    /// Weight of the occupancy BCE term [default: 0.1].
+    #[arg(long)]
+    pub loss_bce: Option<f64>,
+    /// Weight of the total-variation term, further divided by the image side [default: 0.1].
+    #[arg(long)]
+    pub loss_tv: Option<f64>,
+    /// Adversarial loss [default: hinge].
+    #[arg(long, value_enum)]
+    pub adversarial: Option<Adversarial>,
+    /// First learning-rate stage (1-based) with the total-variation term [default: 2, as the
+    /// original].
+    #[arg(long)]
+    pub tv_from_stage: Option<usize>,
+    /// Threads that load and render samples while the network trains.
+    #[arg(long, default_value_t = 1)]
+    pub workers: usize,
+    /// Steps of data prepared ahead.
+    #[arg(long, default_value_t = 4)]
+    pub prefetch: usize,
+    /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
+    #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
+    pub cache_mb: usize,
+    /// Print the run's summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `mvpcc train-orient`.
+#[derive(Debug, Args)]
+pub struct TrainOrientArgs {
+    /// Data: a "shapenet-views" directory (`mvpcc prepare`); its partial samples are used.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Where orienter.safetensors, config.json, train-orient.json and log.jsonl go [default:
+    /// runs/orient-DATA, DATA the data directory's name].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[arg(long, default_value_t = 4000)]
+    pub steps: u64,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Points the network reads from a cloud.
+    #[arg(long, default_value_t = 1024)]
+    pub points: usize,
+    /// Steps between validations.
+    #[arg(long, default_value_t = 250)]
+    pub val_every: u64,
+    #[arg(long, default_value_t = 256)]
+    pub val_samples: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    pub device: DeviceChoice,
+    /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
+    #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
+    pub cache_mb: usize,
+}

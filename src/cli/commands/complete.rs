@@ -1,0 +1,584 @@
+use super::project::default_up;
+use super::{load, progress, Log};
+use crate::cli::args::CompleteArgs;
+use anyhow::{anyhow, bail, Context};
+use burn::tensor::Device;
+use mvpcc::complete::clean::CleanReport;
+use mvpcc::complete::filter::SorParams;
+use mvpcc::complete::orient::{OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::complete::preview::{render, Layer};
+use mvpcc::complete::{
+    Completer, Completion, Method, Options, Run, Settings, Timings, DEFAULT_MODEL, SYNTHETIC,
+};
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::core::frame::UpAxis;
+use mvpcc::io::batch::{self, read_list, walk};
+use mvpcc::io::{atomic_write, check_output, write_cloud, Format};
+use mvpcc::model::device::{open, DeviceChoice};
+use mvpcc::model::inpaint::Inpainter;
+use mvpcc::views::write_views;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
+    let inpainter = match args.method {
+        Method::Network => Some(load_model(args.model.as_deref(), args.device, log)?),
+        Method::Identity | Method::Mirror => None,
+    };
+    let orienter = if orient_mode(&args).needs_network() {
+        Some(load_orienter(args.orienter.as_deref())?)
+    } else {
+        None
+    };
+    let completer = Completer::new(inpainter, orienter);
+    match (&args.input, &args.output, &args.input_dir, &args.output_dir) {
+        (Some(input), Some(output), _, _) => {
+            let views = args.save_views.clone();
+            let report = complete_file(input, output, views, &args, &completer, log)?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            }
+            Ok(())
+        }
+        (None, None, _, Some(_)) => batch(&args, &completer, log),
+        _ => bail!("give IN and OUT, or --input-dir (or --list) and --output-dir"),
+    }
+}
+
+/// The generator from `--model` (a weights file or a run directory) or the built-in one.
+fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Result<Inpainter> {
+    let opened = open(device)?;
+    if let Some(why) = &opened.fallback {
+        log.warn(why);
+    }
+    let inpainter = match path {
+        Some(path) => {
+            let file = if path.is_dir() {
+                path.join("generator.safetensors")
+            } else {
+                path.to_path_buf()
+            };
+            let bytes = std::fs::read(&file).with_context(|| format!("{}", file.display()))?;
+            Inpainter::from_bytes(&bytes, opened.device)
+                .with_context(|| format!("{}", file.display()))?
+        }
+        None => {
+            Inpainter::from_bytes(DEFAULT_MODEL, opened.device).context("the built-in model")?
+        }
+    };
+    Ok(inpainter)
+}
+
+/// The orientation network from `--orienter` or the built-in one; it is small and runs on the
+/// CPU.
+fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
+    match path {
+        Some(path) => {
+            let bytes = std::fs::read(path).with_context(|| format!("{}", path.display()))?;
+            Orienter::from_bytes(&bytes, Device::flex())
+                .with_context(|| format!("{}", path.display()))
+        }
+        None => Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())
+            .context("the built-in orientation network"),
+    }
+}
+
+/// `--orient` (auto by default, none with `--paper`), except for the identity method, whose
+/// output does not depend on the frame.
+fn orient_mode(args: &CompleteArgs) -> OrientMode {
+    let default = if args.paper {
+        OrientMode::None
+    } else {
+        OrientMode::Auto
+    };
+    match args.method {
+        Method::Identity => OrientMode::None,
+        Method::Mirror | Method::Network => args.orient.unwrap_or(default),
+    }
+}
+
+fn up_axis(args: &CompleteArgs, input: &Path) -> UpAxis {
+    args.up
+        .unwrap_or_else(|| default_up(input, args.input_options.format))
+}
+
+/// What the options ask of the pipeline for `input`.
+fn settings(args: &CompleteArgs, input: &Path) -> Settings {
+    Settings {
+        clean: args.clean,
+        orient: orient_mode(args),
+        options: options(args, input),
+    }
+}
+
+fn options(args: &CompleteArgs, input: &Path) -> Options {
+    let up = up_axis(args, input);
+    let sor = SorParams {
+        k: args.sor.sor_k,
+        std_mul: args.sor.sor_std,
+    };
+    if args.paper {
+        return Options {
+            views: args.views.0.clone(),
+            erode: args.erode,
+            sor,
+            keep_views: args.save_views.is_some(),
+            ..Options::paper(up, None)
+        };
+    }
+    Options {
+        method: args.method,
+        up,
+        heading: None,
+        views: args.views.0.clone(),
+        erode: args.erode,
+        smooth: args.smooth,
+        snap: !args.no_snap,
+        sor,
+        keep_input: !args.no_keep_input,
+        merge_pixels: args.merge_pixels,
+        symmetry: !args.no_symmetry,
+        symmetric_frame: true,
+        keep_views: args.save_views.is_some(),
+    }
+}
+
+/// The output format: `--out-format`, else OUT's extension, else the input's format.
+fn output_format(args: &CompleteArgs, input: &Path, output: &Path) -> anyhow::Result<Format> {
+    if let Some(f) = args.output_options.out_format {
+        return Ok(f);
+    }
+    Format::from_path(output)
+        .or_else(|_| match args.input_options.format {
+            Some(f) => Ok(f),
+            None => Format::from_path(input),
+        })
+        .map_err(|e| anyhow!("{}: {e}", output.display()))
+}
+
+/// What `complete --json` reports for one file.
+#[derive(Debug, Serialize)]
+struct FileReport {
+    input: PathBuf,
+    output: PathBuf,
+    method: Method,
+    input_points: usize,
+    output_points: usize,
+    added: usize,
+    mirrored: usize,
+    filtered_out: usize,
+    symmetry_plane: Option<PlaneReport>,
+    orientation: OrientationReport,
+    cleaned: Option<CleanReport>,
+    warnings: Vec<String>,
+    /// Seconds per stage, as `--timings` prints them.
+    seconds: BTreeMap<String, f64>,
+}
+
+/// The symmetry plane `x = x` in the normalized frame, and the share of points it mirrors onto
+/// others.
+#[derive(Debug, Serialize)]
+struct PlaneReport {
+    x: f64,
+    support: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct OrientationReport {
+    heading: Option<f64>,
+    method: &'static str,
+    refinement: Option<f64>,
+}
+
+/// Completes one file; the report of what happened.
+fn complete_file(
+    input: &Path,
+    output: &Path,
+    views: Option<PathBuf>,
+    args: &CompleteArgs,
+    completer: &Completer,
+    log: Log,
+) -> anyhow::Result<FileReport> {
+    check_output(output, &[input])?;
+    let format = output_format(args, input, output)?;
+    let start = Instant::now();
+    let cloud = load(input, args.input_options.format, log)?;
+    let read = start.elapsed();
+    let run = completer
+        .run(&cloud, &settings(args, input))
+        .map_err(|e| anyhow!("{}: {e}", input.display()))?;
+    if let Some((_, report)) = &run.cleaned {
+        log.info(format!(
+            "{}: --clean removed {} ground, {} isolated and {} other-object points",
+            input.display(),
+            report.ground,
+            report.isolated,
+            report.other_objects
+        ));
+    }
+    let done = &run.completion;
+    for w in &done.warnings {
+        log.warn(format!("{}: {w}", input.display()));
+    }
+    let start = Instant::now();
+    write_cloud(
+        output,
+        &done.cloud,
+        Some(format),
+        args.output_options.encoding,
+    )?;
+    let timings = Timings {
+        read,
+        write: start.elapsed(),
+        ..done.timings
+    };
+    if let Some(path) = &args.preview {
+        let measured = run.cleaned.as_ref().map_or(&cloud, |(c, _)| c);
+        write_preview(path, measured, done)?;
+    }
+    if let Some(dir) = &views {
+        save_views(dir, input, done, log)?;
+    }
+    log.info(format!(
+        "{}: {} points → {} ({} completed{}{}) in {:.2} s",
+        output.display(),
+        done.input_points,
+        done.cloud.len(),
+        done.added,
+        if done.mirrored > 0 {
+            format!(", {} of them mirrored", done.mirrored)
+        } else {
+            String::new()
+        },
+        run.orientation.heading.map_or(String::new(), |h| format!(
+            "; heading {h:.1}° ({})",
+            run.orientation.method
+        )),
+        timings.total().as_secs_f64()
+    ));
+    if args.timings && !args.json {
+        for (name, d) in timings.stages() {
+            eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
+        }
+    }
+    Ok(report(input, output, args, run, &timings))
+}
+
+/// The `--json` report of one completed file.
+fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timings) -> FileReport {
+    let done = run.completion;
+    FileReport {
+        input: input.to_path_buf(),
+        output: output.to_path_buf(),
+        method: args.method,
+        input_points: done.input_points,
+        output_points: done.cloud.len(),
+        added: done.added,
+        mirrored: done.mirrored,
+        filtered_out: done.filtered_out,
+        symmetry_plane: done.plane.map(|p| PlaneReport {
+            x: p.offset,
+            support: p.support,
+        }),
+        orientation: OrientationReport {
+            heading: run.orientation.heading,
+            method: run.orientation.method,
+            refinement: run.orientation.refinement,
+        },
+        cleaned: run.cleaned.map(|(_, report)| report),
+        warnings: done.warnings,
+        seconds: t
+            .stages()
+            .iter()
+            .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
+            .collect(),
+    }
+}
+
+/// The network's views as `DIR/input/` and `DIR/output/`; said so when the method ran none.
+fn save_views(dir: &Path, input: &Path, done: &Completion, log: Log) -> anyhow::Result<()> {
+    let Some(views) = &done.views else {
+        log.warn(format!(
+            "{}: --save-views: the method ran no network, so there are no views to save",
+            input.display()
+        ));
+        return Ok(());
+    };
+    for (name, images) in [("input", &views.input), ("output", &views.output)] {
+        let dir = dir.join(name);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        write_views(&dir, images)?;
+    }
+    Ok(())
+}
+
+fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::Result<()> {
+    let flags: Vec<bool> = done
+        .cloud
+        .attribute(SYNTHETIC)
+        .expect("complete flags its points")
+        .values
+        .iter()
+        .map(|&v| v != 0.0)
+        .collect();
+    let none = vec![false; done.input_normalized.len()];
+    let left = Layer {
+        points: &done.input_normalized,
+        colors: input.colors.as_deref(),
+        added: &none,
+        title: format!("INPUT {}", done.input_points),
+    };
+    let right = Layer {
+        points: &done.normalized,
+        colors: done.cloud.colors.as_deref(),
+        added: &flags,
+        title: format!("OUTPUT {} +{}", done.cloud.len(), done.added),
+    };
+    let img = render(&left, &right);
+    atomic_write(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write the preview", path.display()))
+}
+
+/// `*` any run of characters, `?` one character.
+fn matches(pattern: &[char], name: &[char]) -> bool {
+    match (pattern.first(), name.first()) {
+        (None, None) => true,
+        (Some('*'), _) => {
+            matches(&pattern[1..], name) || (!name.is_empty() && matches(pattern, &name[1..]))
+        }
+        (Some('?'), Some(_)) => matches(&pattern[1..], &name[1..]),
+        (Some(p), Some(n)) => p == n && matches(&pattern[1..], &name[1..]),
+        _ => false,
+    }
+}
+
+/// What `complete --json` reports for a batch.
+#[derive(Debug, Serialize)]
+struct BatchReport {
+    /// `i/n` when the run took one shard of the files.
+    shard: Option<String>,
+    /// Files this run took (its shard's, when sharded).
+    files: usize,
+    completed: usize,
+    skipped: usize,
+    failed: usize,
+    results: Vec<BatchEntry>,
+}
+
+#[derive(Debug, Serialize)]
+#[serde(tag = "status", rename_all = "snake_case")]
+enum BatchEntry {
+    Completed(FileReport),
+    /// `--skip-existing` found the output.
+    Skipped {
+        input: PathBuf,
+        output: PathBuf,
+    },
+    Failed {
+        input: PathBuf,
+        error: String,
+    },
+}
+
+/// The batch's inputs relative to its root, this shard's only: the list's, or the cloud files
+/// (or those `--include` matches) under the root.
+fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>> {
+    let files = match &args.list {
+        Some(list) => read_list(list, root)?,
+        None => {
+            if !root.is_dir() {
+                bail!("{}: not a directory", root.display());
+            }
+            let pattern: Option<Vec<char>> = args.include.as_ref().map(|p| p.chars().collect());
+            let files = walk(root, |path| match &pattern {
+                Some(p) => {
+                    let name = path.file_name().unwrap_or_default().to_string_lossy();
+                    matches(p, &name.chars().collect::<Vec<_>>())
+                }
+                None => Format::from_path(path).is_ok(),
+            })?;
+            if files.is_empty() {
+                bail!("{}: no point cloud files", root.display());
+            }
+            files
+        }
+    };
+    Ok(match args.shard {
+        Some(shard) => files
+            .into_iter()
+            .filter(|f| shard.owns(&batch::key(f)))
+            .collect(),
+        None => files,
+    })
+}
+
+/// Where the output of `relative` goes.
+fn batch_output(output_dir: &Path, relative: &Path, args: &CompleteArgs) -> PathBuf {
+    let mut output = output_dir.join(relative);
+    if let Some(format) = args.output_options.out_format {
+        output.set_extension(extension(format));
+    }
+    output
+}
+
+/// Completes, skips or fails one file of a batch.
+fn batch_entry(
+    root: &Path,
+    relative: &Path,
+    output_dir: &Path,
+    args: &CompleteArgs,
+    completer: &Completer,
+) -> BatchEntry {
+    let input = root.join(relative);
+    let output = batch_output(output_dir, relative, args);
+    if args.skip_existing && output.exists() {
+        return BatchEntry::Skipped { input, output };
+    }
+    // Each file's own messages would tear the progress bar; the batch summarizes them.
+    let quiet = Log { quiet: true };
+    let result = output
+        .parent()
+        .map_or(Ok(()), std::fs::create_dir_all)
+        .with_context(|| format!("{}: cannot create", output.display()))
+        .and_then(|()| {
+            let views = args
+                .save_views
+                .as_ref()
+                .map(|d| d.join(relative.with_extension("")));
+            complete_file(&input, &output, views, args, completer, quiet)
+        });
+    match result {
+        Ok(report) => BatchEntry::Completed(report),
+        Err(e) => BatchEntry::Failed {
+            input,
+            error: format!("{e:#}").replace('\n', " "),
+        },
+    }
+}
+
+fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result<()> {
+    let output_dir = args.output_dir.as_deref().expect("clap requires it");
+    let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
+    let files = batch_files(&root, args)?;
+    std::fs::create_dir_all(output_dir)
+        .with_context(|| format!("{}: cannot create", output_dir.display()))?;
+    let bar = progress(files.len(), "completing", log);
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<(usize, BatchEntry)>> = Mutex::new(Vec::new());
+    let jobs = args.jobs.clamp(1, files.len().max(1));
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(relative) = files.get(i) else {
+                    break;
+                };
+                let entry = batch_entry(&root, relative, output_dir, args, completer);
+                results.lock().expect("no worker panics").push((i, entry));
+                bar.inc(1);
+            });
+        }
+    });
+    bar.finish_and_clear();
+    let mut results = results.into_inner().expect("no worker panics");
+    results.sort_by_key(|(i, _)| *i);
+    let results: Vec<BatchEntry> = results.into_iter().map(|(_, e)| e).collect();
+    let report = summarize(args, results, log);
+    log.info(format!(
+        "{} of {} files completed into {}{}, {} skipped, {} failed",
+        report.completed,
+        report.files,
+        output_dir.display(),
+        report
+            .shard
+            .as_ref()
+            .map_or(String::new(), |s| format!(" (shard {s})")),
+        report.skipped,
+        report.failed
+    ));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    }
+    if report.failed > 0 {
+        bail!("{} of {} files failed", report.failed, report.files);
+    }
+    Ok(())
+}
+
+/// Counts the outcomes and says what went wrong with each file on stderr.
+fn summarize(args: &CompleteArgs, results: Vec<BatchEntry>, log: Log) -> BatchReport {
+    let (mut completed, mut skipped, mut failed) = (0, 0, 0);
+    for entry in &results {
+        match entry {
+            BatchEntry::Completed(report) => {
+                completed += 1;
+                for w in &report.warnings {
+                    log.warn(format!("{}: {w}", report.input.display()));
+                }
+            }
+            BatchEntry::Skipped { .. } => skipped += 1,
+            BatchEntry::Failed { error, .. } => {
+                failed += 1;
+                eprintln!("failed: {error}");
+            }
+        }
+    }
+    BatchReport {
+        shard: args.shard.map(|s| s.to_string()),
+        files: results.len(),
+        completed,
+        skipped,
+        failed,
+        results,
+    }
+}
+
+fn extension(format: Format) -> &'static str {
+    match format {
+        Format::Ply => "ply",
+        Format::Pcd => "pcd",
+        Format::Las => "las",
+        Format::Laz => "laz",
+        Format::Xyz => "xyz",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::args::{Cli, Command};
+    use clap::Parser;
+
+    #[test]
+    fn the_library_defaults_are_the_commands() {
+        let cli = Cli::try_parse_from(["mvpcc", "complete", "in.ply", "out.ply"]).unwrap();
+        let Command::Complete(args) = cli.command else {
+            panic!("parsed as another command");
+        };
+        assert_eq!(options(&args, Path::new("in.ply")), Options::default());
+    }
+
+    #[test]
+    fn wildcards() {
+        let m = |p: &str, n: &str| {
+            matches(
+                &p.chars().collect::<Vec<_>>(),
+                &n.chars().collect::<Vec<_>>(),
+            )
+        };
+        assert!(m("partial_*.ply", "partial_12.ply"));
+        assert!(!m("partial_*.ply", "gt.ply"));
+        assert!(m("*", "anything"));
+        assert!(m("a?c", "abc"));
+        assert!(!m("a?c", "ac"));
+        assert!(m("*.p*", "x.pcd"));
+    }
+}

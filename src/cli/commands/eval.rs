@@ -1,0 +1,511 @@
+use super::{load, Log};
+use crate::cli::args::{EvalArgs, GroundTruth, Metric, Normalize};
+use anyhow::{bail, Context};
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::core::frame::{Frame, UpAxis};
+use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
+use mvpcc::datagen::scan::PartialSpec;
+use mvpcc::io::Format;
+use mvpcc::metrics::{compare_clouds, compare_images, CloudMetrics, ImageMetrics};
+use mvpcc::views::projection::CHANNELS;
+use mvpcc::views::{find_views, read_views};
+use serde_json::{json, Map, Value};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+struct Pair {
+    name: String,
+    pred: PathBuf,
+    gt: PathBuf,
+}
+
+fn cloud_files(dir: &Path, format: Option<Format>) -> anyhow::Result<BTreeMap<String, PathBuf>> {
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    let mut files = BTreeMap::new();
+    for entry in entries {
+        let path = entry.with_context(|| dir.display().to_string())?.path();
+        if !path.is_file() || (format.is_none() && Format::from_path(&path).is_err()) {
+            continue;
+        }
+        if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
+            if let Some(other) = files.insert(stem.to_string(), path.clone()) {
+                bail!(
+                    "{}: two clouds share the stem '{stem}' ({} and {})",
+                    dir.display(),
+                    other.display(),
+                    path.display()
+                );
+            }
+        }
+    }
+    Ok(files)
+}
+
+fn matched_pairs(
+    pred_dir: &Path,
+    gt_dir: &Path,
+    format: Option<Format>,
+) -> anyhow::Result<Vec<Pair>> {
+    let preds = cloud_files(pred_dir, format)?;
+    let gts = cloud_files(gt_dir, format)?;
+    let only_pred: Vec<&str> = preds
+        .keys()
+        .filter(|k| !gts.contains_key(*k))
+        .map(|s| s.as_str())
+        .collect();
+    let only_gt: Vec<&str> = gts
+        .keys()
+        .filter(|k| !preds.contains_key(*k))
+        .map(|s| s.as_str())
+        .collect();
+    if !only_pred.is_empty() || !only_gt.is_empty() {
+        bail!(
+            "{} and {}: unmatched file stems: only in predictions: [{}]; only in ground truth: [{}]",
+            pred_dir.display(),
+            gt_dir.display(),
+            only_pred.join(", "),
+            only_gt.join(", ")
+        );
+    }
+    if preds.is_empty() {
+        bail!("{}: no point cloud files", pred_dir.display());
+    }
+    Ok(preds
+        .into_iter()
+        .map(|(name, pred)| {
+            let gt = gts[&name].clone();
+            Pair { name, pred, gt }
+        })
+        .collect())
+}
+
+fn score(pair: &Pair, args: &EvalArgs, log: Log) -> anyhow::Result<CloudMetrics> {
+    let mut pred = load(&pair.pred, args.input.format, log)?;
+    let mut gt = load(&pair.gt, args.input.format, log)?;
+    if args.normalize == Normalize::GtBox {
+        let frame = Frame::fit(&gt, UpAxis::Y).with_context(|| pair.gt.display().to_string())?;
+        let map = |c: &PointCloud| PointCloud::from_positions(frame.normalize(c).positions);
+        pred = map(&pred);
+        gt = map(&gt);
+    }
+    Ok(compare_clouds(&pred.positions, &gt.positions, &args.tau))
+}
+
+fn cloud_json(m: &CloudMetrics, metrics: &[Metric]) -> Map<String, Value> {
+    let mut o = Map::new();
+    if metrics.contains(&Metric::Cd) {
+        o.insert("cd_l2_half".into(), json!(m.cd_l2_half));
+        o.insert("cd_l1".into(), json!(m.cd_l1));
+        o.insert("cd_l2".into(), json!(m.cd_l2));
+    }
+    if metrics.contains(&Metric::F1) {
+        o.insert("fscore".into(), json!(m.fscores));
+    }
+    o
+}
+
+fn mean_metrics(all: &[CloudMetrics]) -> CloudMetrics {
+    let n = all.len() as f64;
+    let avg = |f: &dyn Fn(&CloudMetrics) -> f64| all.iter().map(f).sum::<f64>() / n;
+    let mut mean = all[0].clone();
+    mean.cd_l2_half = avg(&|m| m.cd_l2_half);
+    mean.cd_l1 = avg(&|m| m.cd_l1);
+    mean.cd_l2 = avg(&|m| m.cd_l2);
+    for (i, f) in mean.fscores.iter_mut().enumerate() {
+        f.precision = avg(&|m| m.fscores[i].precision);
+        f.recall = avg(&|m| m.fscores[i].recall);
+        f.f1 = avg(&|m| m.fscores[i].f1);
+    }
+    mean.pred_points = all.iter().map(|m| m.pred_points).sum::<usize>() / all.len();
+    mean.gt_points = all.iter().map(|m| m.gt_points).sum::<usize>() / all.len();
+    mean
+}
+
+fn table_header(metrics: &[Metric], taus: &[f64]) -> String {
+    let mut h = format!("{:<24} {:>9} {:>9}", "name", "pred_pts", "gt_pts");
+    if metrics.contains(&Metric::Cd) {
+        h += &format!(" {:>12} {:>12} {:>12}", "cd_l2_half", "cd_l1", "cd_l2");
+    }
+    if metrics.contains(&Metric::F1) {
+        for t in taus {
+            h += &format!(
+                " {:>10} {:>10} {:>10}",
+                format!("f1@{t}"),
+                format!("prec@{t}"),
+                format!("rec@{t}")
+            );
+        }
+    }
+    h
+}
+
+fn table_row(name: &str, m: &CloudMetrics, metrics: &[Metric]) -> String {
+    let mut r = format!("{:<24} {:>9} {:>9}", name, m.pred_points, m.gt_points);
+    if metrics.contains(&Metric::Cd) {
+        r += &format!(
+            " {:>12.6e} {:>12.6e} {:>12.6e}",
+            m.cd_l2_half, m.cd_l1, m.cd_l2
+        );
+    }
+    if metrics.contains(&Metric::F1) {
+        for f in &m.fscores {
+            r += &format!(" {:>10.6} {:>10.6} {:>10.6}", f.f1, f.precision, f.recall);
+        }
+    }
+    r
+}
+
+/// One test partial of a data directory and its completion.
+struct DataSample {
+    category: String,
+    protocol: &'static str,
+    name: String,
+    pred: PathBuf,
+    gt: PathBuf,
+    spec: PartialSpec,
+}
+
+/// The completion of `<category>/<model>/partial_<k>` in `pred_dir`, whatever its extension.
+fn find_prediction(dir: &Path, k: usize) -> Option<PathBuf> {
+    let stem = format!("partial_{k}");
+    std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| {
+            p.file_stem().and_then(|s| s.to_str()) == Some(&stem) && Format::from_path(p).is_ok()
+        })
+}
+
+/// A model's ground truth; a coarse one that an older `prepare` did not write is sampled from
+/// the fine one beside it.
+fn load_ground_truth(path: &Path, log: Log) -> anyhow::Result<PointCloud> {
+    if path.ends_with(GT_COARSE) && !path.exists() {
+        return Ok(coarse(&load(&path.with_file_name(GT_FINE), None, log)?));
+    }
+    load(path, None, log)
+}
+
+fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyhow::Result<()> {
+    let manifest_path = data.join("manifest.json");
+    let text = std::fs::read_to_string(&manifest_path).with_context(|| {
+        format!(
+            "{}: not a data directory from `mvpcc prepare`",
+            manifest_path.display()
+        )
+    })?;
+    let manifest: Manifest = serde_json::from_str(&text)
+        .with_context(|| format!("{}: unreadable manifest", manifest_path.display()))?;
+    let layout = Layout {
+        root: data.to_path_buf(),
+    };
+    let mut samples = Vec::new();
+    let mut missing = Vec::new();
+    for model in manifest.models.iter().filter(|m| m.split == TEST) {
+        let clouds = layout.clouds(&model.split, &model.category, &model.name);
+        let gt = match args.ground_truth {
+            GroundTruth::Fine => clouds.join(GT_FINE),
+            GroundTruth::Coarse => clouds.join(GT_COARSE),
+        };
+        let dir = pred_dir.join(&model.category).join(&model.name);
+        for sample in &model.samples {
+            let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
+            match find_prediction(&dir, sample.k) {
+                Some(pred) => samples.push(DataSample {
+                    category: model.category.clone(),
+                    protocol: match sample.spec {
+                        PartialSpec::Cameras { .. } => "cameras",
+                        PartialSpec::Scanner { .. } => "scanner",
+                    },
+                    name,
+                    pred,
+                    gt: gt.clone(),
+                    spec: sample.spec.clone(),
+                }),
+                None => missing.push(name),
+            }
+        }
+    }
+    if !missing.is_empty() {
+        bail!(
+            "{}: no completion for {} of {} test partials (first: {})",
+            pred_dir.display(),
+            missing.len(),
+            missing.len() + samples.len(),
+            missing[0]
+        );
+    }
+    if samples.is_empty() {
+        bail!("{}: the data has no test partials", data.display());
+    }
+    let bar = super::progress(samples.len(), "eval", log);
+    let results = samples
+        .iter()
+        .map(|s| {
+            let pred = load(&s.pred, None, log)?;
+            let gt = load_ground_truth(&s.gt, log)?;
+            let turned: Vec<[f64; 3]> = pred
+                .positions
+                .iter()
+                .map(|p| s.spec.to_object_frame(p.map(|c| c as f32)).map(f64::from))
+                .collect();
+            bar.inc(1);
+            Ok(compare_clouds(&turned, &gt.positions, &args.tau))
+        })
+        .collect::<anyhow::Result<Vec<CloudMetrics>>>()?;
+    bar.finish_and_clear();
+
+    let mut groups: BTreeMap<String, Vec<CloudMetrics>> = BTreeMap::new();
+    for (s, m) in samples.iter().zip(&results) {
+        for key in [
+            format!("category {}", s.category),
+            format!("protocol {}", s.protocol),
+        ] {
+            groups.entry(key).or_default().push(m.clone());
+        }
+    }
+    let mut table = vec![table_header(&args.metrics, &args.tau)];
+    let mut out = Map::new();
+    out.insert("data".into(), json!(data.display().to_string()));
+    out.insert("pred_dir".into(), json!(pred_dir.display().to_string()));
+    out.insert("ground_truth".into(), json!(args.ground_truth));
+    out.insert("thresholds".into(), json!(args.tau));
+    let mut group_json = Map::new();
+    for (key, ms) in groups.iter().chain([(&"all".to_string(), &results)]) {
+        let mean = mean_metrics(ms);
+        table.push(table_row(
+            &format!("{key} ({})", ms.len()),
+            &mean,
+            &args.metrics,
+        ));
+        let mut o = cloud_json(&mean, &args.metrics);
+        o.insert("samples".into(), json!(ms.len()));
+        group_json.insert(key.clone(), Value::Object(o));
+    }
+    out.insert("groups".into(), Value::Object(group_json));
+    out.insert(
+        "samples".into(),
+        Value::Array(
+            samples
+                .iter()
+                .zip(&results)
+                .map(|(s, m)| {
+                    let mut o = cloud_json(m, &args.metrics);
+                    o.insert("name".into(), json!(s.name));
+                    o.insert("protocol".into(), json!(s.protocol));
+                    Value::Object(o)
+                })
+                .collect(),
+        ),
+    );
+    print_results(args.json, out, &table)
+}
+
+fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec<ImageMetrics>)> {
+    let cameras = find_views(gt_dir)?;
+    let gt = read_views(gt_dir, Some(&cameras))?;
+    let pred = read_views(pred_dir, Some(&cameras))?;
+    for (dir, v) in [(gt_dir, &gt), (pred_dir, &pred)] {
+        if !v.has_color {
+            bail!("{}: no color_NNN.png images to compare", dir.display());
+        }
+    }
+    if pred.size != gt.size {
+        bail!(
+            "{}: views are {} px but the ground truth's are {} px",
+            pred_dir.display(),
+            pred.size,
+            gt.size
+        );
+    }
+    let plane = gt.size * gt.size;
+    let per_view = (0..gt.views())
+        .map(|v| {
+            let rgb = |img: &mvpcc::views::projection::ViewImages| {
+                img.view_pixels(v)[3 * plane..CHANNELS * plane].to_vec()
+            };
+            compare_images(&rgb(&pred), &rgb(&gt), gt.size)
+        })
+        .collect();
+    Ok((cameras, per_view))
+}
+
+pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
+    if let (Some(data), Some(pred_dir)) = (&args.data, &args.pred_dir) {
+        return eval_dataset(data, pred_dir, &args, log);
+    }
+    let (geometry, color) = check(&args)?;
+    let mut out = Map::new();
+    out.insert(
+        "normalization".into(),
+        json!(match args.normalize {
+            Normalize::None => "none",
+            Normalize::GtBox => "gt-box",
+        }),
+    );
+    out.insert("thresholds".into(), json!(args.tau));
+    let mut table = Vec::new();
+    if geometry {
+        eval_clouds(&args, log, &mut out, &mut table)?;
+    }
+    if color {
+        if !table.is_empty() {
+            table.push(String::new());
+        }
+        eval_view_dirs(&args, &mut out, &mut table)?;
+    }
+    print_results(args.json, out, &table)
+}
+
+/// Which kinds of metric the options ask for (geometry, colour), after checking that they
+/// name what those need.
+fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
+    let geometry = args
+        .metrics
+        .iter()
+        .any(|m| matches!(m, Metric::Cd | Metric::F1));
+    let color = args
+        .metrics
+        .iter()
+        .any(|m| matches!(m, Metric::Psnr | Metric::Ssim | Metric::Mae));
+    if args.pred_dir.is_some() && args.gt_dir.is_none() {
+        bail!("--pred-dir needs --gt-dir or --data");
+    }
+    let have_clouds = args.pred.is_some() || args.pred_dir.is_some();
+    if geometry && !have_clouds {
+        bail!("cd and f1 compare clouds: pass --pred and --gt, or --pred-dir and --gt-dir");
+    }
+    if color && args.pred_views.is_none() {
+        bail!("psnr, ssim and mae compare view images: pass --pred-views and --gt-views");
+    }
+    if let Some(t) = args.tau.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
+        bail!("--tau {t}: thresholds must be positive numbers");
+    }
+    Ok((geometry, color))
+}
+
+/// CD and F-scores of `--pred`/`--gt` or of matched files in `--pred-dir`/`--gt-dir`.
+fn eval_clouds(
+    args: &EvalArgs,
+    log: Log,
+    out: &mut Map<String, Value>,
+    table: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let pairs = match (&args.pred, &args.gt, &args.pred_dir, &args.gt_dir) {
+        (Some(pred), Some(gt), _, _) => vec![Pair {
+            name: pred
+                .file_stem()
+                .map_or("pred".into(), |s| s.to_string_lossy().into_owned()),
+            pred: pred.clone(),
+            gt: gt.clone(),
+        }],
+        (_, _, Some(pd), Some(gd)) => matched_pairs(pd, gd, args.input.format)?,
+        _ => unreachable!("checked: clouds were given"),
+    };
+    let bar = super::progress(pairs.len(), "eval", log);
+    let mut results = Vec::with_capacity(pairs.len());
+    for pair in &pairs {
+        bar.set_message(pair.name.clone());
+        results.push(score(pair, args, log)?);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    table.push(table_header(&args.metrics, &args.tau));
+    let mut rows = Vec::new();
+    for (pair, m) in pairs.iter().zip(&results) {
+        table.push(table_row(&pair.name, m, &args.metrics));
+        let mut o = Map::new();
+        o.insert("name".into(), json!(pair.name));
+        o.insert("pred".into(), json!(pair.pred.display().to_string()));
+        o.insert("gt".into(), json!(pair.gt.display().to_string()));
+        o.insert("pred_points".into(), json!(m.pred_points));
+        o.insert("gt_points".into(), json!(m.gt_points));
+        o.extend(cloud_json(m, &args.metrics));
+        rows.push(Value::Object(o));
+    }
+    out.insert("pairs".into(), Value::Array(rows));
+    if results.len() > 1 {
+        let mean = mean_metrics(&results);
+        table.push(table_row(
+            &format!("mean of {}", results.len()),
+            &mean,
+            &args.metrics,
+        ));
+        out.insert(
+            "mean".into(),
+            Value::Object(cloud_json(&mean, &args.metrics)),
+        );
+    }
+    Ok(())
+}
+
+/// PSNR, SSIM and MAE of `--pred-views` against `--gt-views`, per view and averaged.
+fn eval_view_dirs(
+    args: &EvalArgs,
+    out: &mut Map<String, Value>,
+    table: &mut Vec<String>,
+) -> anyhow::Result<()> {
+    let (Some(pred_dir), Some(gt_dir)) = (&args.pred_views, &args.gt_views) else {
+        unreachable!("checked: clap requires both");
+    };
+    let (cameras, per_view) = eval_views(pred_dir, gt_dir)?;
+    let n = per_view.len() as f64;
+    let mean = ImageMetrics {
+        psnr: per_view.iter().map(|m| m.psnr).sum::<f64>() / n,
+        ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / n,
+        mae: per_view.iter().map(|m| m.mae).sum::<f64>() / n,
+    };
+    let pick = |m: &ImageMetrics| {
+        let mut o = Map::new();
+        if args.metrics.contains(&Metric::Psnr) {
+            o.insert("psnr_db".into(), json!(m.psnr));
+        }
+        if args.metrics.contains(&Metric::Ssim) {
+            o.insert("ssim".into(), json!(m.ssim));
+        }
+        if args.metrics.contains(&Metric::Mae) {
+            o.insert("mae".into(), json!(m.mae));
+        }
+        o
+    };
+    let mut views = pick(&mean);
+    views.insert("pred".into(), json!(pred_dir.display().to_string()));
+    views.insert("gt".into(), json!(gt_dir.display().to_string()));
+    views.insert("cameras".into(), json!(cameras));
+    views.insert(
+        "per_view".into(),
+        Value::Array(per_view.iter().map(|m| Value::Object(pick(m))).collect()),
+    );
+    out.insert("views".into(), Value::Object(views));
+    table.push(format!(
+        "{:<8} {:>10} {:>10} {:>10}",
+        "view", "psnr_db", "ssim", "mae"
+    ));
+    let row = |name: String, m: &ImageMetrics| {
+        format!(
+            "{name:<8} {:>10.4} {:>10.6} {:>10.6}",
+            m.psnr, m.ssim, m.mae
+        )
+    };
+    for (c, m) in cameras.iter().zip(&per_view) {
+        table.push(row(format!("{c:03}"), m));
+    }
+    table.push(row("mean".into(), &mean));
+    Ok(())
+}
+
+/// The results on stdout: the JSON object with `--json`, the table otherwise.
+fn print_results(
+    json: bool,
+    out: serde_json::Map<String, Value>,
+    table: &[String],
+) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&Value::Object(out))?);
+    } else {
+        for line in table {
+            println!("{line}");
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,26 @@
+use super::{load, Log};
+use crate::cli::args::FilterArgs;
+use mvpcc::complete::filter::inliers;
+use mvpcc::io::{check_output, write_cloud};
+
+pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
+    check_output(&args.output, &[&args.input])?;
+    let cloud = load(&args.input, args.input_options.format, log)?;
+    let filtered = cloud.filter(&inliers(&cloud.positions, args.sor.params()));
+    write_cloud(
+        &args.output,
+        &filtered,
+        args.output_options.out_format,
+        args.output_options.encoding,
+    )?;
+    log.info(format!(
+        "{}: kept {} of {} points ({} outliers removed, k = {}, σ = {})",
+        args.output.display(),
+        filtered.len(),
+        cloud.len(),
+        cloud.len() - filtered.len(),
+        args.sor.sor_k,
+        args.sor.sor_std
+    ));
+    Ok(())
+}

@@ -1,0 +1,85 @@
+//! One module per subcommand; errors become anyhow here and one `error: …` line in main.
+
+mod complete;
+mod eval;
+mod filter;
+mod prepare;
+mod profile;
+mod project;
+mod reproject;
+mod synth;
+mod train;
+mod train_orient;
+
+use crate::cli::args::{Cli, Command};
+use mvpcc::core::cloud::PointCloud;
+use mvpcc::io::{read_cloud, Format};
+use std::fmt::Display;
+use std::path::Path;
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    let log = Log { quiet: cli.quiet };
+    match cli.command {
+        Command::Complete(args) => complete::run(args, log),
+        Command::Eval(args) => eval::run(args, log),
+        Command::Project(args) => project::run(args, log),
+        Command::Reproject(args) => reproject::run(args, log),
+        Command::Filter(args) => filter::run(args, log),
+        Command::Profile(args) => profile::run(args, log),
+        Command::Prepare(args) => prepare::run(args, log),
+        Command::Synth(args) => synth::run(args, log),
+        Command::Train(args) => train::run(*args, log),
+        Command::TrainOrient(args) => train_orient::run(args, log),
+    }
+}
+
+/// Messages for a person, on stderr; `--quiet` keeps only warnings.
+#[derive(Debug, Clone, Copy)]
+pub struct Log {
+    quiet: bool,
+}
+
+impl Log {
+    pub fn info(&self, message: impl Display) {
+        if !self.quiet {
+            eprintln!("{message}");
+        }
+    }
+
+    pub fn warn(&self, message: impl Display) {
+        eprintln!("warning: {message}");
+    }
+
+    pub fn quiet(&self) -> bool {
+        self.quiet
+    }
+}
+
+/// Reads a cloud, warning about points dropped for NaN or infinite coordinates.
+pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Result<PointCloud> {
+    let loaded = read_cloud(path, format)?;
+    if loaded.non_finite_dropped > 0 {
+        log.warn(format!(
+            "{}: dropped {} points with NaN or infinite coordinates",
+            path.display(),
+            loaded.non_finite_dropped
+        ));
+    }
+    Ok(loaded.cloud)
+}
+
+/// A progress bar with ETA on stderr; hidden under `--quiet` or for a single item.
+pub(crate) fn progress(len: usize, label: &str, log: Log) -> indicatif::ProgressBar {
+    let bar = if len > 1 && !log.quiet() {
+        indicatif::ProgressBar::new(len as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{label} {{bar:40}} {{pos}}/{{len}} {{msg}} [{{elapsed}} < {{eta}}]"
+        ))
+        .expect("a valid progress template"),
+    );
+    bar
+}

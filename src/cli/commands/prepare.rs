@@ -1,0 +1,303 @@
+use super::{synth, Log};
+use crate::cli::args::PrepareArgs;
+use anyhow::{bail, Context};
+use mvpcc::core::camera::check_view_set;
+use mvpcc::datagen::data::{
+    discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
+    Source, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
+};
+use mvpcc::datagen::scan::PartialParams;
+use mvpcc::io::atomic_write;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
+
+/// What `--json` prints.
+#[derive(Debug, Serialize)]
+struct Summary {
+    models: usize,
+    resumed: usize,
+    train: usize,
+    test: usize,
+    samples: usize,
+    skipped: usize,
+    seconds: f64,
+    models_per_second: f64,
+    /// `i/n` when the run prepared one shard of the meshes.
+    shard: Option<String>,
+    /// The manifest written, by a run without `--shard`.
+    manifest: Option<String>,
+}
+
+/// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
+fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {
+    match (&args.meshes, args.synth) {
+        (Some(dir), _) => {
+            if !dir.is_dir() {
+                bail!("{}: not a directory", dir.display());
+            }
+            Ok(dir.clone())
+        }
+        (None, Some(count)) => {
+            let dir = args.out.join("meshes");
+            synth::generate(
+                &dir,
+                count,
+                &args.synth_options.category,
+                args.synth_options.seed,
+                true,
+                log,
+            )?;
+            Ok(dir)
+        }
+        (None, None) => unreachable!("clap requires --meshes or --synth"),
+    }
+}
+
+/// Prepares `todo` in parallel with a progress bar: the models made and the meshes skipped
+/// for a problem of their own; any other error (a full disk) stops the run.
+fn prepare_all(
+    todo: &[&Source],
+    params: &PrepareParams,
+    layout: &Layout,
+    log: Log,
+) -> anyhow::Result<(Vec<ModelEntry>, Vec<Skipped>)> {
+    let bar = super::progress(todo.len(), "prepare", log);
+    let stop = AtomicBool::new(false);
+    let failed = Mutex::new(Vec::new());
+    let fatal = Mutex::new(None);
+    let made: Vec<ModelEntry> = todo
+        .par_iter()
+        .filter_map(|source| {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            let result = prepare_model(source, params, layout);
+            bar.inc(1);
+            match result {
+                Ok(entry) => Some(entry),
+                Err(e) if e.is_input_problem() => {
+                    bar.suspend(|| log.warn(format!("skipped {e}")));
+                    failed.lock().expect("not poisoned").push(Skipped {
+                        path: source.path.clone(),
+                        problem: e.to_string(),
+                    });
+                    None
+                }
+                Err(e) => {
+                    stop.store(true, Ordering::Relaxed);
+                    fatal.lock().expect("not poisoned").get_or_insert(e);
+                    None
+                }
+            }
+        })
+        .collect();
+    bar.finish_and_clear();
+    if let Some(e) = fatal.into_inner().expect("not poisoned") {
+        return Err(e.into());
+    }
+    Ok((made, failed.into_inner().expect("not poisoned")))
+}
+
+/// Writes the dataset's manifest; its path.
+fn write_manifest(
+    out: &Path,
+    params: PrepareParams,
+    models: Vec<ModelEntry>,
+    skipped: Vec<Skipped>,
+) -> anyhow::Result<String> {
+    let manifest = Manifest {
+        mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
+        params,
+        models,
+        skipped,
+    };
+    let path = out.join(MANIFEST_FILE);
+    atomic_write(&path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &manifest).map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(path.display().to_string())
+}
+
+fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
+    if !(0.0..=1.0).contains(&args.split) {
+        bail!("--split must lie in [0, 1], got {}", args.split);
+    }
+    if args.samples == 0 {
+        bail!("--samples must be at least 1");
+    }
+    if args.size < 8 || args.gt_size < 8 {
+        bail!("--size and --gt-size must be at least 8 pixels");
+    }
+    if args.min_points == 0 || args.min_points > args.max_points {
+        bail!(
+            "--min-points ({}) must be at least 1 and at most --max-points ({})",
+            args.min_points,
+            args.max_points
+        );
+    }
+    if !(args.gt_voxel >= 0.0 && args.noise >= 0.0 && args.yaw_error >= 0.0) {
+        bail!("--gt-voxel, --noise and --yaw-error must not be negative");
+    }
+    if args.up.axis == args.forward.axis {
+        bail!(
+            "--up {} and --forward {} must be different axes",
+            args.up,
+            args.forward
+        );
+    }
+    check_view_set(&args.views.0)?;
+    Ok(PrepareParams {
+        views: args.views.0.clone(),
+        size: args.size,
+        gt_size: args.gt_size,
+        gt_voxel: args.gt_voxel,
+        samples: args.samples,
+        train_fraction: args.split,
+        partial: PartialParams {
+            kinds: args.partial,
+            min_points: args.min_points,
+            max_points: args.max_points,
+            max_yaw_deg: args.yaw_error,
+            max_noise: args.noise,
+        },
+        up: args.up.to_string(),
+        forward: args.forward.to_string(),
+        seed: args.synth_options.seed,
+        clouds: args.clouds,
+        allow_missing_materials: args.allow_missing_materials,
+        max_triangles: args.max_triangles,
+    })
+}
+
+/// Records the settings on first use; a resumed run must use the same ones, or the
+/// directory would mix data made in two ways.
+fn claim(out: &Path, params: &PrepareParams) -> anyhow::Result<()> {
+    let path = out.join(PARAMS_FILE);
+    match std::fs::read_to_string(&path) {
+        Ok(text) => {
+            let before: PrepareParams = serde_json::from_str(&text)
+                .with_context(|| format!("{}: unreadable settings file", path.display()))?;
+            if &before != params {
+                let now = serde_json::to_value(params)?;
+                let then = serde_json::to_value(&before)?;
+                let changed: Vec<String> = now
+                    .as_object()
+                    .into_iter()
+                    .flatten()
+                    .filter(|(k, v)| then.get(k.as_str()) != Some(v))
+                    .map(|(k, v)| {
+                        format!(
+                            "{k} {} → {v}",
+                            then.get(k.as_str()).unwrap_or(&serde_json::Value::Null)
+                        )
+                    })
+                    .collect();
+                bail!(
+                    "{}: was prepared with other settings ({}); use another --out directory",
+                    out.display(),
+                    changed.join(", ")
+                );
+            }
+            Ok(())
+        }
+        Err(_) => atomic_write(&path, |w| {
+            serde_json::to_writer_pretty(&mut *w, params).map_err(std::io::Error::other)
+        })
+        .with_context(|| format!("{}: cannot write", path.display())),
+    }
+}
+
+pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
+    let params = params(&args)?;
+    let out = &args.out;
+    if out.exists() && !out.is_dir() {
+        bail!("{}: exists and is not a directory", out.display());
+    }
+    let meshes = meshes_dir(&args, log)?;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    claim(out, &params)?;
+    let (mut sources, mut skipped) = discover(&meshes)?;
+    if sources.is_empty() {
+        bail!(
+            "{}: no meshes found (.obj, .ply, .gltf, .glb)",
+            meshes.display()
+        );
+    }
+    if let Some(shard) = args.shard {
+        sources.retain(|s| shard.owns(&format!("{}/{}", s.category, s.name)));
+        // The run without --shard that writes the manifest lists them.
+        skipped.clear();
+    }
+    let layout = Layout { root: out.clone() };
+    let mut done: Vec<ModelEntry> = Vec::new();
+    let mut todo = Vec::new();
+    for s in &sources {
+        match finished(&layout, s, &params) {
+            Some(entry) => done.push(entry),
+            None => todo.push(s),
+        }
+    }
+    let resumed = done.len();
+    if resumed > 0 {
+        log.info(format!(
+            "{resumed} of {} models already prepared",
+            sources.len()
+        ));
+    }
+    let started = std::time::Instant::now();
+    let (made, failed) = prepare_all(&todo, &params, &layout, log)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let new = made.len();
+    done.extend(made);
+    done.sort_by(|a, b| (&a.category, &a.name).cmp(&(&b.category, &b.name)));
+    skipped.extend(failed);
+    skipped.sort_by(|a, b| a.path.cmp(&b.path));
+    let summary = Summary {
+        models: done.len(),
+        resumed,
+        train: done.iter().filter(|m| m.split == TRAIN).count(),
+        test: done.iter().filter(|m| m.split == TEST).count(),
+        samples: done.iter().map(|m| m.samples.len()).sum(),
+        skipped: skipped.len(),
+        seconds,
+        models_per_second: if seconds > 0.0 {
+            new as f64 / seconds
+        } else {
+            0.0
+        },
+        shard: args.shard.map(|s| s.to_string()),
+        manifest: match args.shard {
+            Some(_) => None,
+            None => Some(write_manifest(out, params, done, skipped)?),
+        },
+    };
+    log.info(format!(
+        "prepared {} models ({} train, {} test; {} new at {:.2}/s, {} resumed), {} samples; {}",
+        summary.models,
+        summary.train,
+        summary.test,
+        new,
+        summary.models_per_second,
+        resumed,
+        summary.samples,
+        match (&summary.manifest, &summary.shard) {
+            (Some(path), _) => format!("{} skipped — see {path}", summary.skipped),
+            (None, Some(shard)) => format!(
+                "shard {shard}: once every shard is done, run the same command without --shard \
+                 to write the manifest"
+            ),
+            (None, None) => unreachable!("a run without --shard writes the manifest"),
+        }
+    ));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    }
+    if summary.models == 0 && args.shard.is_none() {
+        bail!("{}: none of the meshes could be used", meshes.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,59 @@
+use super::{load, Log};
+use crate::cli::args::ProjectArgs;
+use anyhow::{bail, Context};
+use mvpcc::core::camera::Camera;
+use mvpcc::core::frame::{Frame, UpAxis};
+use mvpcc::io::Format;
+use mvpcc::views::projection::project;
+use mvpcc::views::{write_views, ViewsInfo};
+use std::path::Path;
+
+/// MLS formats are z-up; the dataset's own formats are y-up.
+pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
+    match format.or_else(|| Format::from_path(input).ok()) {
+        Some(Format::Las | Format::Laz) => UpAxis::Z,
+        _ => UpAxis::Y,
+    }
+}
+
+pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
+    let cameras = Camera::set(&args.views.0, args.size)?;
+    let outdir = &args.outdir;
+    if outdir.exists() && !outdir.is_dir() {
+        bail!("{}: exists and is not a directory", outdir.display());
+    }
+    let cloud = load(&args.input, args.input_options.format, log)?;
+    let up = args
+        .up
+        .unwrap_or_else(|| default_up(&args.input, args.input_options.format));
+    let frame = Frame::fit(&cloud, up).with_context(|| args.input.display().to_string())?;
+    let normalized = frame.normalize(&cloud);
+    let views = project(
+        &normalized.positions_f32(),
+        normalized.colors.as_deref(),
+        &cameras,
+    );
+    if !outdir.is_dir() {
+        std::fs::create_dir(outdir)
+            .with_context(|| format!("{}: cannot create", outdir.display()))?;
+    }
+    write_views(outdir, &views)?;
+    let info = ViewsInfo {
+        frame,
+        up,
+        views: args.views.0.clone(),
+        size: args.size,
+        points: cloud.len(),
+    };
+    info.write(outdir)?;
+    log.info(format!(
+        "{}: {} points → {} views of {}×{} px, {} pixels occupied",
+        outdir.display(),
+        cloud.len(),
+        views.views(),
+        args.size,
+        args.size,
+        views.occupied()
+    ));
+    Ok(())
+}

@@ -1,0 +1,63 @@
+use super::Log;
+use crate::cli::args::ReprojectArgs;
+use anyhow::bail;
+use mvpcc::complete::filter::inliers;
+use mvpcc::io::{check_output, write_cloud};
+use mvpcc::views::reprojection::{reproject, ReprojectOptions};
+use mvpcc::views::{find_views, locations_path, read_views, ViewsInfo};
+
+pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
+    let cameras = match &args.views {
+        Some(v) => v.0.clone(),
+        None => find_views(&args.viewdir)?,
+    };
+    let inputs: Vec<_> = cameras
+        .iter()
+        .map(|&c| locations_path(&args.viewdir, c))
+        .collect();
+    check_output(
+        &args.output,
+        &inputs.iter().map(|p| p.as_path()).collect::<Vec<_>>(),
+    )?;
+    let views = read_views(&args.viewdir, Some(&cameras))?;
+    let merged = reproject(
+        &views,
+        ReprojectOptions {
+            erode: args.erode,
+            dedup_tolerance: args.dedup,
+            smooth: args.smooth,
+        },
+    );
+    if merged.is_empty() {
+        bail!(
+            "{}: no occupied pixels left to re-project (try a smaller --erode; raw sparse scans need --erode 0)",
+            args.viewdir.display()
+        );
+    }
+    let filtered = merged.filter(&inliers(&merged.positions, args.sor.params()));
+    let info = if args.normalized {
+        None
+    } else {
+        ViewsInfo::read(&args.viewdir)?
+    };
+    let output = match info {
+        Some(info) => info.frame.denormalize(&filtered),
+        None => filtered,
+    };
+    write_cloud(
+        &args.output,
+        &output,
+        args.output_options.out_format,
+        args.output_options.encoding,
+    )?;
+    log.info(format!(
+        "{}: {} points from {} views ({} occupied pixels, {} after erosion and de-duplication, {} outliers removed)",
+        args.output.display(),
+        output.len(),
+        views.views(),
+        views.occupied(),
+        merged.len(),
+        merged.len() - output.len()
+    ));
+    Ok(())
+}

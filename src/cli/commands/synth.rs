@@ -1,0 +1,143 @@
+use super::Log;
+use crate::cli::args::SynthArgs;
+use anyhow::{bail, Context};
+use mvpcc::datagen::mesh::{write_obj, Mesh};
+use mvpcc::datagen::synth::{contact_sheet, synthesize, Category};
+use mvpcc::io::atomic_write;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub(super) const SYNTH_FILE: &str = "synth.json";
+const PREVIEW_OBJECTS: usize = 16;
+
+/// `synth.json`: how a mesh directory was generated.
+#[derive(Debug, Serialize, Deserialize, PartialEq)]
+pub(super) struct SynthManifest {
+    pub mvpcc_version: String,
+    pub seed: u64,
+    pub categories: Vec<Category>,
+    pub objects: Vec<SynthEntry>,
+}
+
+#[derive(Debug, Serialize, Deserialize, PartialEq)]
+pub(super) struct SynthEntry {
+    /// Generation index: with the run's seed and categories it gives the object back.
+    pub index: usize,
+    pub name: String,
+    pub category: Category,
+    pub variant: String,
+    pub seed: u64,
+    pub path: PathBuf,
+    pub triangles: usize,
+}
+
+pub(super) fn run(args: SynthArgs, log: Log) -> anyhow::Result<()> {
+    generate(
+        &args.out,
+        args.count,
+        &args.synth_options.category,
+        args.synth_options.seed,
+        args.preview,
+        log,
+    )?;
+    Ok(())
+}
+
+/// Writes `count` objects into `out` (skipping the work when `out` already holds exactly this
+/// run) and returns its manifest.
+pub(super) fn generate(
+    out: &Path,
+    count: usize,
+    categories: &[Category],
+    seed: u64,
+    preview: bool,
+    log: Log,
+) -> anyhow::Result<SynthManifest> {
+    if count == 0 {
+        bail!("--count must be at least 1");
+    }
+    if out.exists() && !out.is_dir() {
+        bail!("{}: exists and is not a directory", out.display());
+    }
+    let manifest_path = out.join(SYNTH_FILE);
+    if let Ok(text) = std::fs::read_to_string(&manifest_path) {
+        if let Ok(done) = serde_json::from_str::<SynthManifest>(&text) {
+            if done.seed == seed && done.categories == categories && done.objects.len() == count {
+                log.info(format!(
+                    "{}: {count} objects already generated",
+                    out.display()
+                ));
+                if preview {
+                    write_preview(out, &done, log)?;
+                }
+                return Ok(done);
+            }
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let bar = super::progress(count, "synth", log);
+    let started = std::time::Instant::now();
+    let objects = (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let s = synthesize(i, seed, categories);
+            let dir = out.join(s.category.name());
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
+            let path = dir.join(format!("{}.obj", s.name));
+            write_obj(&path, &s.mesh)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+            bar.inc(1);
+            Ok(SynthEntry {
+                index: i,
+                name: s.name,
+                category: s.category,
+                variant: s.variant,
+                seed: s.seed,
+                path: path.strip_prefix(out).unwrap_or(&path).to_path_buf(),
+                triangles: s.mesh.triangles.len(),
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    bar.finish_and_clear();
+    let manifest = SynthManifest {
+        mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
+        seed,
+        categories: categories.to_vec(),
+        objects,
+    };
+    atomic_write(&manifest_path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &manifest).map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write", manifest_path.display()))?;
+    log.info(format!(
+        "wrote {count} objects to {} in {:.1} s",
+        out.display(),
+        started.elapsed().as_secs_f64()
+    ));
+    if preview {
+        write_preview(out, &manifest, log)?;
+    }
+    Ok(manifest)
+}
+
+fn write_preview(out: &Path, manifest: &SynthManifest, log: Log) -> anyhow::Result<()> {
+    let meshes: Vec<Mesh> = manifest
+        .objects
+        .iter()
+        .take(PREVIEW_OBJECTS)
+        .map(|o| synthesize(o.index, manifest.seed, &manifest.categories).mesh)
+        .collect();
+    let refs: Vec<&Mesh> = meshes.iter().collect();
+    let sheet = contact_sheet(&refs, 192, 4);
+    let path = out.join("preview.png");
+    atomic_write(&path, |w| {
+        sheet
+            .write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write", path.display()))?;
+    log.info(format!("preview: {}", path.display()));
+    Ok(())
+}

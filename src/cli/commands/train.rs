@@ -1,0 +1,359 @@
+//! `mvpcc train`: options → settings (or a run's saved settings on `--resume`), the device,
+//! Ctrl-C, and a progress bar over the training loop.
+
+use super::Log;
+use crate::cli::args::TrainArgs;
+use anyhow::{bail, Context};
+use indicatif::{ProgressBar, ProgressStyle};
+use mvpcc::core::camera::DEFAULT_VIEWS;
+use mvpcc::model::device::open;
+use mvpcc::model::gan::StepLosses;
+use mvpcc::model::{ModelConfig, Preset};
+use mvpcc::train::{
+    train, InitWeights, Job, LogRecord, Monitor, Outcome, TrainSettings, CONFIG_FILE, SETTINGS_FILE,
+};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Settings a resumed run may change: they decide how the run is carried out and reported, not
+/// what it computes.
+const OPERATIONAL: [&str; 2] = ["log_every", "keep"];
+
+fn model_config(name: &str) -> anyhow::Result<ModelConfig> {
+    let preset = match name {
+        "paper" => Some(Preset::Paper),
+        "default" | "cpu" => Some(Preset::Cpu),
+        "small" => Some(Preset::Small),
+        "tiny" => Some(Preset::Tiny),
+        _ => None,
+    };
+    if let Some(p) = preset {
+        return Ok(p.config());
+    }
+    let path = Path::new(name);
+    let text = std::fs::read_to_string(path).with_context(|| {
+        format!(
+            "--config {name}: neither a preset (paper, default, small, tiny) nor a readable file"
+        )
+    })?;
+    let config: ModelConfig = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a model config", path.display()))?;
+    Ok(config)
+}
+
+fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot resume without it", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: unreadable", path.display()))
+}
+
+/// The options given on the command line applied over `base`.
+fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
+    if let Some(v) = &args.views {
+        s.views = v.0.clone();
+    }
+    macro_rules! set {
+        ($($field:ident <- $arg:ident),*) => {
+            $(if let Some(v) = args.$arg { s.$field = v; })*
+        };
+    }
+    set!(batch <- batch, accumulate <- accumulate, stage_steps <- stage_steps,
+        patience <- patience, val_every <- val_every, val_samples <- val_samples,
+        val_fraction <- val_fraction, checkpoint_every <- checkpoint_every, keep <- keep,
+        log_every <- log_every, seed <- seed, tv_from_stage <- tv_from_stage);
+    let loss = &mut s.loss;
+    for (weight, arg) in [
+        (&mut loss.l1, args.loss_l1),
+        (&mut loss.adversarial, args.loss_adversarial),
+        (&mut loss.perceptual, args.loss_perceptual),
+        (&mut loss.style, args.loss_style),
+        (&mut loss.occupancy, args.loss_bce),
+        (&mut loss.tv, args.loss_tv),
+    ] {
+        *weight = arg.unwrap_or(*weight);
+    }
+    loss.adversarial_kind = args.adversarial.unwrap_or(loss.adversarial_kind);
+    if let Some(lr) = args.lr {
+        s.stage_rates = vec![lr, lr / 10.0, lr / 100.0];
+    }
+    if let Some(path) = &args.vgg19 {
+        s.vgg19 = Some(path.clone());
+    }
+    if args.no_mirror {
+        s.augment.mirror = false;
+    }
+    if let Some(y) = args.max_yaw {
+        s.augment.max_yaw_deg = y;
+    }
+    if let Some(j) = args.color_jitter {
+        s.augment.color_jitter = j;
+    }
+    s
+}
+
+/// The first field of `new` that differs from `saved`, ignoring `except`, named down to the
+/// innermost field (`loss.style`).
+fn first_difference<T: serde::Serialize>(saved: &T, new: &T, except: &[&str]) -> Option<String> {
+    let (Ok(a), Ok(b)) = (serde_json::to_value(saved), serde_json::to_value(new)) else {
+        return None;
+    };
+    differing_field(&a, &b, except, "")
+}
+
+fn differing_field(a: &Value, b: &Value, except: &[&str], path: &str) -> Option<String> {
+    let (Value::Object(a), Value::Object(b)) = (a, b) else {
+        return (a != b).then(|| format!("{path}: the run has {a}, the options give {b}"));
+    };
+    a.iter()
+        .filter(|(k, _)| !except.contains(&k.as_str()))
+        .find_map(|(k, v)| {
+            let inner = if path.is_empty() {
+                k.clone()
+            } else {
+                format!("{path}.{k}")
+            };
+            differing_field(v, b.get(k).unwrap_or(&Value::Null), &[], &inner)
+        })
+}
+
+fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {
+    model.validate()?;
+    if settings.batch == 0 || settings.accumulate == 0 {
+        bail!("--batch and --accumulate must be at least 1");
+    }
+    if !(0.0..1.0).contains(&settings.val_fraction) {
+        bail!("--val-fraction must lie in [0, 1)");
+    }
+    if settings
+        .stage_rates
+        .iter()
+        .any(|r| !r.is_finite() || *r <= 0.0)
+    {
+        bail!("--lr must be a positive number");
+    }
+    if settings.stage_steps == 0 {
+        bail!("--stage-steps must be at least 1");
+    }
+    Ok(())
+}
+
+/// The settings and model config of the run: from the options on a new run, from the run's
+/// files on `--resume` (options that would change them are refused).
+fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, ModelConfig)> {
+    let fresh_model = |mut base: ModelConfig| {
+        base.channels = args.channels.unwrap_or(base.channels);
+        base.size = args.size.unwrap_or(base.size);
+        match args.fusion {
+            Some(fusion) => base.with_fusion_kind(fusion),
+            None => base,
+        }
+    };
+    let (settings, mut model) = if args.resume {
+        let saved: TrainSettings = read_saved(&run.join(SETTINGS_FILE))?;
+        let saved_model: ModelConfig = read_saved(&run.join(CONFIG_FILE))?;
+        let settings = apply(args, saved.clone());
+        if let Some(diff) = first_difference(&saved, &settings, &OPERATIONAL) {
+            bail!(
+                "{}: a resumed run keeps its settings ({diff})",
+                run.display()
+            );
+        }
+        let model = match &args.config {
+            Some(name) => fresh_model(model_config(name)?),
+            None => fresh_model(saved_model.clone()),
+        }
+        .with_views(saved_model.views);
+        if let Some(diff) = first_difference(&saved_model, &model, &[]) {
+            bail!("{}: a resumed run keeps its model ({diff})", run.display());
+        }
+        (settings, model)
+    } else {
+        let mut settings = apply(args, TrainSettings::new(DEFAULT_VIEWS.to_vec()));
+        settings.init = args
+            .init
+            .as_deref()
+            .map(|path| InitWeights::find(path, args.init_discriminator.clone()))
+            .transpose()?;
+        let base = match (&args.config, &settings.init) {
+            (Some(name), _) => model_config(name)?,
+            (None, Some(init)) => init.config()?,
+            (None, None) => model_config("default")?,
+        };
+        (settings, fresh_model(base))
+    };
+    model.views = settings.views.len();
+    check(&settings, &model)?;
+    if let Some(init) = settings.init.as_ref().filter(|_| !args.resume) {
+        init.check(&model)?;
+    }
+    Ok((settings, model))
+}
+
+struct Progress {
+    bar: ProgressBar,
+    log: Log,
+    stop: Arc<AtomicBool>,
+}
+
+impl Monitor for Progress {
+    fn message(&mut self, text: &str) {
+        if !self.log.quiet() {
+            self.bar.suspend(|| eprintln!("{text}"));
+        }
+    }
+
+    fn warn(&mut self, text: &str) {
+        self.bar.suspend(|| self.log.warn(text));
+    }
+
+    fn start(&mut self, first_step: u64, planned: u64) {
+        self.bar.set_length(planned);
+        self.bar.set_position(first_step);
+        self.bar.reset_eta();
+    }
+
+    fn stepped(&mut self, step: u64, losses: &StepLosses) {
+        self.bar.set_position(step);
+        self.bar.set_message(format!(
+            "G {:.3} D {:.3} L1 {:.4}",
+            losses.generator, losses.discriminator, losses.l1
+        ));
+    }
+
+    fn record(&mut self, record: &LogRecord) {
+        let line = match record {
+            LogRecord::Train { .. } => return,
+            LogRecord::Validation { step, scores, .. } => format!(
+                "step {step}: validation CD {} F1@0.01 {:.3} (P {:.3} R {:.3}), geometry PSNR {:.2} dB SSIM {:.3}{}",
+                scores.cd.map_or("- (empty output)".to_string(), |c| format!("{c:.3e}")),
+                scores.f1,
+                scores.precision,
+                scores.recall,
+                scores.geometry.psnr,
+                scores.geometry.ssim,
+                scores.color.map_or(String::new(), |c| format!(", colour PSNR {:.2} dB", c.psnr)),
+            ),
+            LogRecord::Baseline { scores } => format!(
+                "partial inputs of the {} validation samples: CD {} F1@0.01 {:.3}",
+                scores.samples,
+                scores.cd.map_or("-".to_string(), |c| format!("{c:.3e}")),
+                scores.f1
+            ),
+        };
+        if !self.log.quiet() {
+            self.bar.suspend(|| eprintln!("{line}"));
+        }
+    }
+
+    fn interrupted(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
+    }
+}
+
+fn default_run(data: &Path) -> PathBuf {
+    let name = data
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "run".to_string());
+    Path::new("runs").join(name)
+}
+
+pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
+    let run = args.out.clone().unwrap_or_else(|| default_run(&args.data));
+    let (settings, model) = resolve(&args, &run)?;
+    let opened = open(args.device)?;
+    if let Some(why) = &opened.fallback {
+        log.warn(why);
+    }
+    log.info(format!(
+        "training {} ({} views of {}², width {}, {} residual blocks, {:?}) on {} into {}",
+        args.data.display(),
+        model.views,
+        model.size,
+        model.width,
+        model.res_blocks,
+        model.channels,
+        opened.description,
+        run.display()
+    ));
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    // The first Ctrl-C asks the loop to checkpoint and stop; a second one stops at once.
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    })
+    .context("cannot install the Ctrl-C handler")?;
+
+    let bar = if log.quiet() {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "step {pos}/{len} {bar:30} {msg} [{elapsed} < {eta}, {per_sec}]",
+        )
+        .expect("a valid progress template"),
+    );
+    let mut monitor = Progress { bar, log, stop };
+    let job = Job {
+        data: args.data.clone(),
+        run: run.clone(),
+        model,
+        settings: settings.clone(),
+        max_steps: args.steps,
+        device: opened.device,
+        resume: args.resume,
+        workers: args.workers,
+        prefetch: args.prefetch,
+        cache_bytes: args.cache_mb << 20,
+    };
+    let result = train(job, &mut monitor);
+    monitor.bar.finish_and_clear();
+    let summary = result?;
+    match summary.outcome {
+        Outcome::Interrupted => log.info(format!(
+            "interrupted at step {}: checkpoint {} (continue with --resume)",
+            summary.state.step,
+            summary.checkpoint.display()
+        )),
+        Outcome::StepLimit => log.info(format!(
+            "stopped at step {} (--steps): checkpoint {}",
+            summary.state.step,
+            summary.checkpoint.display()
+        )),
+        Outcome::Finished => log.info(format!(
+            "all {} stages done at step {}: checkpoint {}",
+            settings.stage_rates.len(),
+            summary.state.step,
+            summary.checkpoint.display()
+        )),
+    }
+    if let (Some(cd), Some(step)) = (summary.state.best_cd, summary.state.best_step) {
+        log.info(format!(
+            "best validation CD {cd:.3e} at step {step}: {}",
+            run.join("best").display()
+        ));
+    }
+    if args.json {
+        let json = serde_json::json!({
+            "run": run,
+            "outcome": format!("{:?}", summary.outcome).to_lowercase(),
+            "step": summary.state.step,
+            "stage": summary.state.stage + 1,
+            "checkpoint": summary.checkpoint,
+            "best_cd": summary.state.best_cd,
+            "best_step": summary.state.best_step,
+            "baseline": summary.baseline,
+            "validation": summary.last,
+        });
+        println!("{}", serde_json::to_string_pretty(&json)?);
+    }
+    Ok(())
+}

@@ -1,0 +1,861 @@
+//! The completion pipeline: a partial cloud in, the completed cloud in the same coordinates out.
+//!
+//! read → frame → project → inpaint → re-project (eroded) → outlier filter → merge with the
+//! measured points → back to the input's frame. The measured points are kept exactly; completed
+//! points are added only where no measured point lies within `merge_pixels` model pixels, and
+//! carry a `synthetic` flag so a user can tell them apart.
+//!
+//! Two baselines run through the same code: `identity` (the partial as it is) and `mirror` (the
+//! partial united with its mirror image across the vehicle's long vertical plane).
+
+pub mod clean;
+pub mod filter;
+pub mod orient;
+pub mod preview;
+pub mod symmetry;
+
+use crate::complete::clean::{clean, CleanReport};
+use crate::complete::filter::{inliers, SorParams};
+use crate::complete::orient::{orient, OrientMode, Orientation, Orienter, DEFAULT_ORIENTER};
+use crate::complete::symmetry::{find_plane, mirror, Plane};
+use crate::core::camera::{Camera, CameraError};
+use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
+use crate::core::frame::{Frame, FrameError, UpAxis};
+use crate::core::knn::KnnIndex;
+use crate::model::inpaint::{InpaintError, Inpainter};
+use crate::model::weights::WeightsError;
+use crate::views::projection::{project, ViewImages};
+use crate::views::reprojection::{reproject, snap_to_rays, ReprojectOptions};
+use burn::tensor::Device;
+use nalgebra::{Matrix3, SymmetricEigen};
+use serde::Serialize;
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// Fewer measured points than this are refused: there is nothing to complete from.
+pub const MIN_POINTS: usize = 50;
+/// Below this many points the result is unreliable and a warning says so.
+const SPARSE_POINTS: usize = 500;
+/// The built-in generator (see README, *The default model*, for how it was trained).
+pub const DEFAULT_MODEL: &[u8] = include_bytes!("../../assets/model.safetensors");
+
+pub use crate::core::cloud::SYNTHETIC;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// The inpainting network.
+    Network,
+    /// The partial unchanged (a baseline).
+    Identity,
+    /// The partial and its mirror image across the vehicle's long vertical plane (a baseline).
+    Mirror,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    pub method: Method,
+    pub up: UpAxis,
+    /// Which way the input's front faces (see [`crate::core::frame`]); `None` keeps the input's
+    /// axes, turning only its longer horizontal side onto the length.
+    pub heading: Option<f64>,
+    /// Rig cameras the model's views come from.
+    pub views: Vec<usize>,
+    /// Erosion element side for the inpainted views.
+    pub erode: usize,
+    /// Median window side over the inpainted views' XYZ.
+    pub smooth: usize,
+    /// Move each inpainted pixel's XYZ onto its pixel's ray (see [`snap_to_rays`]).
+    pub snap: bool,
+    pub sor: SorParams,
+    /// Keep the measured points and add completed points where they are missing; otherwise
+    /// the output is the network's re-projected cloud alone (the paper's output).
+    pub keep_input: bool,
+    /// A completed point within this many model pixels of a measured point is not added.
+    pub merge_pixels: f64,
+    /// Also add the measured points' mirror images (network method; the mirror method always
+    /// does).
+    pub symmetry: bool,
+    /// Fit the network's box to the measured points and their mirror images, centred on the
+    /// symmetry plane as the training objects are; otherwise the measured points' own box.
+    pub symmetric_frame: bool,
+    /// Return the network's input and output views in the [`Completion`].
+    pub keep_views: bool,
+}
+
+impl Options {
+    /// The paper's pipeline and nothing else: the measured points' own box, projection,
+    /// inpainting, 3×3 erosion, re-projection, SOR (k 20, σ 5), back to the input's frame; no
+    /// mirror images, no snapping, the measured points not kept.
+    pub fn paper(up: UpAxis, heading: Option<f64>) -> Options {
+        Options {
+            up,
+            heading,
+            snap: false,
+            keep_input: false,
+            symmetry: false,
+            symmetric_frame: false,
+            ..Options::default()
+        }
+    }
+}
+
+/// What `mvpcc complete IN OUT` does for a y-up input without options.
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            method: Method::Network,
+            up: UpAxis::Y,
+            heading: None,
+            views: crate::core::camera::DEFAULT_VIEWS.to_vec(),
+            erode: 3,
+            smooth: 0,
+            snap: true,
+            sor: SorParams::default(),
+            keep_input: true,
+            merge_pixels: 4.0,
+            symmetry: true,
+            symmetric_frame: true,
+            keep_views: false,
+        }
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum CompleteError {
+    #[error("only {0} points; completion needs at least {MIN_POINTS}")]
+    TooFewPoints(usize),
+    #[error(transparent)]
+    Frame(#[from] FrameError),
+    #[error(transparent)]
+    Inpaint(#[from] InpaintError),
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    #[error("the model takes {model} views, --views names {given}")]
+    Views { model: usize, given: usize },
+    #[error("the network method needs a model")]
+    NoModel,
+}
+
+/// Wall time of each stage (the paper's Table 4 rows, and ours). Reading and writing are
+/// measured by whoever does them (the command); the rest by [`Completer::run`] and [`complete`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Timings {
+    pub read: Duration,
+    pub clean: Duration,
+    pub orientation: Duration,
+    /// Frame, symmetry plane and mirror images.
+    pub symmetry: Duration,
+    pub projection: Duration,
+    pub encoder: Duration,
+    pub fusion: Duration,
+    pub decoder: Duration,
+    pub reprojection: Duration,
+    pub filter: Duration,
+    pub write: Duration,
+}
+
+impl Timings {
+    /// Every stage with its name, in pipeline order (what `--timings` prints).
+    pub fn stages(&self) -> [(&'static str, Duration); 12] {
+        [
+            ("read", self.read),
+            ("clean", self.clean),
+            ("orientation", self.orientation),
+            ("symmetry", self.symmetry),
+            ("projection", self.projection),
+            ("encoder", self.encoder),
+            ("fusion", self.fusion),
+            ("decoder", self.decoder),
+            ("re-projection", self.reprojection),
+            ("filter", self.filter),
+            ("write", self.write),
+            ("total", self.total()),
+        ]
+    }
+
+    pub fn total(&self) -> Duration {
+        self.read
+            + self.clean
+            + self.orientation
+            + self.symmetry
+            + self.projection
+            + self.encoder
+            + self.fusion
+            + self.decoder
+            + self.reprojection
+            + self.filter
+            + self.write
+    }
+}
+
+/// What a [`Completer`] does around [`complete`]: whether it cleans the input first and how it
+/// finds the heading (which it then puts in `options.heading`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub clean: bool,
+    pub orient: OrientMode,
+    pub options: Options,
+}
+
+/// A whole completion run.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The cleaned input and what cleaning removed, when it ran.
+    pub cleaned: Option<(PointCloud, CleanReport)>,
+    pub orientation: Orientation,
+    pub completion: Completion,
+}
+
+/// The completion pipeline with its networks loaded once, for any number of clouds:
+/// clean → orient → frame → symmetry and mirror images → network → merge.
+///
+/// ```
+/// use burn::tensor::Device;
+/// use mvpcc::complete::{Completer, Options, Settings};
+/// use mvpcc::complete::orient::OrientMode;
+/// use mvpcc::io::read_cloud;
+///
+/// let scan = read_cloud("assets/example/car_partial.ply".as_ref(), None)?.cloud;
+/// let completer = Completer::builtin(Device::flex())?;
+/// let settings = Settings {
+///     clean: false,
+///     orient: OrientMode::Auto,
+///     options: Options::default(),
+/// };
+/// let run = completer.run(&scan, &settings)?;
+/// // Every measured point is kept, and completed ones are added after them.
+/// assert_eq!(run.completion.input_points, scan.len());
+/// assert!(run.completion.cloud.len() > scan.len());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct Completer {
+    inpainter: Option<Inpainter>,
+    orienter: Option<Orienter>,
+}
+
+impl Completer {
+    /// `inpainter` is needed by the network method, `orienter` by the orientation modes that
+    /// run the orientation network.
+    pub fn new(inpainter: Option<Inpainter>, orienter: Option<Orienter>) -> Completer {
+        Completer {
+            inpainter,
+            orienter,
+        }
+    }
+
+    /// The built-in generator on `device` and the built-in orientation network (on the CPU,
+    /// where a network that small runs fastest).
+    pub fn builtin(device: Device) -> Result<Completer, WeightsError> {
+        Ok(Completer::new(
+            Some(Inpainter::from_bytes(DEFAULT_MODEL, device)?),
+            Some(Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())?),
+        ))
+    }
+
+    pub fn inpainter(&self) -> Option<&Inpainter> {
+        self.inpainter.as_ref()
+    }
+
+    pub fn orienter(&self) -> Option<&Orienter> {
+        self.orienter.as_ref()
+    }
+
+    /// Completes `cloud` as `settings` say.
+    pub fn run(&self, cloud: &PointCloud, settings: &Settings) -> Result<Run, CompleteError> {
+        let up = settings.options.up;
+        let start = Instant::now();
+        let cleaned = settings.clean.then(|| clean(cloud, up));
+        let clean_time = start.elapsed();
+        let input = cleaned.as_ref().map_or(cloud, |(c, _)| c);
+        let start = Instant::now();
+        let orientation = orient(input, up, settings.orient, self.orienter.as_ref());
+        let orient_time = start.elapsed();
+        let options = Options {
+            heading: orientation.heading,
+            ..settings.options.clone()
+        };
+        let mut completion = complete(input, self.inpainter.as_ref(), &options)?;
+        completion.timings.clean = clean_time;
+        completion.timings.orientation = orient_time;
+        Ok(Run {
+            cleaned,
+            orientation,
+            completion,
+        })
+    }
+}
+
+/// A completed cloud and what happened on the way.
+#[derive(Debug, Clone)]
+pub struct Completion {
+    /// In the input's coordinates: the measured points first (unless `keep_input` was off),
+    /// then the added ones, with the [`SYNTHETIC`] attribute.
+    pub cloud: PointCloud,
+    /// The same points in the network's unit box (for previews).
+    pub normalized: Vec<[f64; 3]>,
+    /// The measured points in the network's unit box.
+    pub input_normalized: Vec<[f64; 3]>,
+    pub frame: Frame,
+    pub input_points: usize,
+    /// Completed points in the output, of which `mirrored` are mirror images.
+    pub added: usize,
+    pub mirrored: usize,
+    /// Re-projected network points removed by the outlier filter.
+    pub filtered_out: usize,
+    pub plane: Option<Plane>,
+    /// Why the input looks unlike what the model was trained on.
+    pub warnings: Vec<String>,
+    pub timings: Timings,
+    /// The views the network read and wrote, when [`Options::keep_views`] asked for them.
+    pub views: Option<NetworkViews>,
+}
+
+/// The network's views of one object, in the dataset's format once written.
+#[derive(Debug, Clone)]
+pub struct NetworkViews {
+    /// The measured points projected into the model's cameras.
+    pub input: ViewImages,
+    /// What the generator made of them, before snapping.
+    pub output: ViewImages,
+}
+
+/// Completes `input`. `inpainter` is needed by the network method only.
+pub fn complete(
+    input: &PointCloud,
+    inpainter: Option<&Inpainter>,
+    options: &Options,
+) -> Result<Completion, CompleteError> {
+    if input.len() < MIN_POINTS {
+        return Err(CompleteError::TooFewPoints(input.len()));
+    }
+    let symmetry_start = Instant::now();
+    let Framed {
+        frame,
+        measured,
+        plane,
+    } = framed(input, options)?;
+    let mut warnings = distribution_warnings(&measured);
+    let mut timings = Timings::default();
+
+    // Mirror images first: they come from measured points, so they are trusted over the network.
+    let mirror_plane = match options.method {
+        Method::Identity => None,
+        Method::Mirror => plane,
+        Method::Network => plane.filter(|_| options.symmetry),
+    };
+    if options.method == Method::Mirror && plane.is_none() {
+        warnings.push("no symmetry plane found; nothing is mirrored".to_string());
+    }
+    let measured_index = KnnIndex::new(&measured);
+    let mut added = mirror_plane.map_or_else(Vec::new, |plane| {
+        mirror_images(&measured, &measured_index, plane)
+    });
+    let mut mirrored = added.len();
+    timings.symmetry = symmetry_start.elapsed();
+
+    let mut filtered_out = 0;
+    let mut keep_input = true;
+    let mut views = None;
+    if options.method == Method::Network {
+        let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
+        let network = run_network(input, &measured, inpainter, options, &mut timings)?;
+        filtered_out = network.filtered_out;
+        views = network.views;
+        let start = Instant::now();
+        if options.keep_input {
+            let tolerance = options.merge_pixels / inpainter.config().size as f64;
+            let covered = covered_by(&measured, &added, &network.predicted, tolerance);
+            added.extend(network_points(
+                &network.predicted,
+                &measured_index,
+                Some(&covered),
+            ));
+        } else {
+            keep_input = false;
+            mirrored = 0;
+            added = network_points(&network.predicted, &measured_index, None);
+        }
+        timings.reprojection += start.elapsed();
+    }
+
+    let cloud = assemble(input, &frame, &added, keep_input);
+    let mut normalized = if keep_input {
+        measured.clone()
+    } else {
+        Vec::new()
+    };
+    normalized.extend(added.iter().map(|a| a.position));
+    Ok(Completion {
+        cloud,
+        normalized,
+        input_normalized: measured,
+        frame,
+        input_points: input.len(),
+        added: added.len(),
+        mirrored,
+        filtered_out,
+        plane,
+        warnings,
+        timings,
+        views,
+    })
+}
+
+/// The network's frame for an input, the measured points in it, and the symmetry plane.
+struct Framed {
+    frame: Frame,
+    measured: Vec<[f64; 3]>,
+    plane: Option<Plane>,
+}
+
+/// Fits the frame (in the heading's pose), finds the symmetry plane when anything needs it, and
+/// refits the frame around the plane when `symmetric_frame` asks.
+fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError> {
+    let fitted = match options.heading {
+        Some(heading) => Frame::fit_heading(input, options.up, heading)?,
+        None => Frame::fit(input, options.up)?,
+    };
+    let fitted_points: Vec<[f64; 3]> = input
+        .positions
+        .iter()
+        .map(|&p| fitted.to_normalized(p))
+        .collect();
+    let wants_plane = options.symmetric_frame
+        || options.method == Method::Mirror
+        || (options.method == Method::Network && options.symmetry);
+    let plane = wants_plane.then(|| find_plane(&fitted_points)).flatten();
+    let frame = if options.symmetric_frame {
+        symmetric_frame(&fitted, &fitted_points, plane)
+    } else {
+        fitted.clone()
+    };
+    let measured = input
+        .positions
+        .iter()
+        .map(|&p| frame.to_normalized(p))
+        .collect();
+    let plane = plane.map(|p| Plane {
+        offset: frame.to_normalized(fitted.to_input([p.offset, 0.0, 0.0]))[0],
+        tolerance: p.tolerance * fitted.extent / frame.extent,
+        ..p
+    });
+    Ok(Framed {
+        frame,
+        measured,
+        plane,
+    })
+}
+
+/// Mirror images of the measured points across `plane`, where no measured point lies within
+/// the plane's tolerance.
+fn mirror_images(measured: &[[f64; 3]], index: &KnnIndex, plane: Plane) -> Vec<Added> {
+    let images: Vec<[f64; 3]> = measured.iter().map(|&p| mirror(p, plane.offset)).collect();
+    images
+        .iter()
+        .zip(index.nearest(&images))
+        .enumerate()
+        .filter(|(_, (_, (_, d)))| *d > plane.tolerance)
+        .map(|(i, (image, _))| Added {
+            position: *image,
+            color: None,
+            source: i,
+        })
+        .collect()
+}
+
+/// What the network made of one object, re-projected and filtered.
+struct NetworkOutput {
+    predicted: PointCloud,
+    filtered_out: usize,
+    views: Option<NetworkViews>,
+}
+
+/// Projection, inpainting, snapping, re-projection and the outlier filter, timed.
+fn run_network(
+    input: &PointCloud,
+    measured: &[[f64; 3]],
+    inpainter: &Inpainter,
+    options: &Options,
+    timings: &mut Timings,
+) -> Result<NetworkOutput, CompleteError> {
+    let config = inpainter.config();
+    if config.views != options.views.len() {
+        return Err(CompleteError::Views {
+            model: config.views,
+            given: options.views.len(),
+        });
+    }
+    let start = Instant::now();
+    let cameras = Camera::set(&options.views, config.size)?;
+    let points: Vec<[f32; 3]> = measured.iter().map(|p| p.map(|c| c as f32)).collect();
+    let batch = [project(&points, input.colors.as_deref(), &cameras)];
+    timings.projection = start.elapsed();
+
+    let (mut out, stages) = inpainter.inpaint_timed(&batch)?;
+    timings.encoder = stages.encoder;
+    timings.fusion = stages.fusion;
+    timings.decoder = stages.decoder;
+
+    let start = Instant::now();
+    let mut inpainted = out.pop().expect("one object in, one out");
+    let views = options.keep_views.then(|| {
+        let [input] = batch;
+        NetworkViews {
+            input,
+            output: inpainted.clone(),
+        }
+    });
+    if options.snap {
+        snap_to_rays(&mut inpainted, &cameras);
+    }
+    let predicted = reproject(
+        &inpainted,
+        ReprojectOptions {
+            erode: options.erode,
+            smooth: options.smooth,
+            ..ReprojectOptions::default()
+        },
+    );
+    timings.reprojection = start.elapsed();
+
+    let start = Instant::now();
+    let keep = inliers(&predicted.positions, options.sor);
+    let filtered_out = keep.iter().filter(|&&k| !k).count();
+    let predicted = predicted.filter(&keep);
+    timings.filter = start.elapsed();
+    Ok(NetworkOutput {
+        predicted,
+        filtered_out,
+        views,
+    })
+}
+
+/// Per network point, whether a measured point or an added mirror image lies within
+/// `tolerance` of it.
+fn covered_by(
+    measured: &[[f64; 3]],
+    added: &[Added],
+    predicted: &PointCloud,
+    tolerance: f64,
+) -> Vec<bool> {
+    let mut covered = measured.to_vec();
+    covered.extend(added.iter().map(|a| a.position));
+    KnnIndex::new(&covered)
+        .nearest(&predicted.positions)
+        .into_iter()
+        .map(|(_, d)| d <= tolerance)
+        .collect()
+}
+
+/// The network's points (those not `covered`, when given), each taking its attributes from
+/// its nearest measured point.
+fn network_points(
+    predicted: &PointCloud,
+    measured_index: &KnnIndex,
+    covered: Option<&[bool]>,
+) -> Vec<Added> {
+    let sources = measured_index.nearest(&predicted.positions);
+    predicted
+        .positions
+        .iter()
+        .zip(sources)
+        .enumerate()
+        .filter(|(i, _)| !covered.is_some_and(|c| c[*i]))
+        .map(|(i, (&position, (source, _)))| Added {
+            position,
+            color: predicted.colors.as_ref().map(|c| c[i]),
+            source,
+        })
+        .collect()
+}
+
+/// A completed point in the network's frame; `source` is the measured point it takes its
+/// attributes (and, without a colour of its own, its colour) from.
+struct Added {
+    position: [f64; 3],
+    color: Option<[u8; 3]>,
+    source: usize,
+}
+
+/// The frame the network expects: the training objects' boxes are centred on their symmetry
+/// plane and hold the whole object, so the box is fitted to the measured points together with
+/// their mirror images. Without a plane, the measured points' own box.
+fn symmetric_frame(fitted: &Frame, points: &[[f64; 3]], plane: Option<Plane>) -> Frame {
+    let Some(plane) = plane else {
+        return fitted.clone();
+    };
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for &p in points {
+        for q in [p, mirror(p, plane.offset)] {
+            for i in 0..3 {
+                lo[i] = lo[i].min(q[i]);
+                hi[i] = hi[i].max(q[i]);
+            }
+        }
+    }
+    let center = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
+    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    Frame {
+        center: fitted.to_input(center),
+        extent: fitted.extent * extent,
+        rotation: fitted.rotation,
+    }
+}
+
+/// The output cloud in the input's coordinates: the measured points exactly as read (when
+/// kept), then the added points, with [`SYNTHETIC`] marking them.
+fn assemble(input: &PointCloud, frame: &Frame, added: &[Added], keep_input: bool) -> PointCloud {
+    let sources: Vec<usize> = added.iter().map(|a| a.source).collect();
+    let mut extra = input.select(&sources);
+    for (p, a) in extra.positions.iter_mut().zip(added) {
+        *p = frame.to_input(a.position);
+    }
+    if let Some(colors) = extra.colors.as_mut() {
+        for (c, a) in colors.iter_mut().zip(added) {
+            if let Some(own) = a.color {
+                *c = own;
+            }
+        }
+    }
+    let flag_of_input = |i: usize| {
+        input
+            .attribute(SYNTHETIC)
+            .map_or(0.0, |attribute| attribute.values[i])
+    };
+    let mut out = if keep_input {
+        let mut out = input.clone();
+        out.positions.extend(extra.positions);
+        if let (Some(c), Some(e)) = (out.colors.as_mut(), extra.colors) {
+            c.extend(e);
+        }
+        for (a, e) in out.attributes.iter_mut().zip(extra.attributes) {
+            a.values.extend(e.values);
+        }
+        out
+    } else {
+        extra
+    };
+    let mut flags: Vec<f64> = if keep_input {
+        (0..input.len()).map(flag_of_input).collect()
+    } else {
+        Vec::new()
+    };
+    flags.extend(std::iter::repeat_n(1.0, added.len()));
+    out.attributes.retain(|a| a.name != SYNTHETIC);
+    out.attributes.push(Attribute {
+        name: SYNTHETIC.to_string(),
+        kind: ScalarKind::U8,
+        values: flags,
+    });
+    out
+}
+
+/// Warnings for inputs far from the street vehicles the model learned: too few points, a thin
+/// (pole- or wire-like) shape, or points in one plane (a single scan line, a wall).
+fn distribution_warnings(points: &[[f64; 3]]) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if points.len() < SPARSE_POINTS {
+        warnings.push(format!(
+            "only {} points: completion from so few is unreliable",
+            points.len()
+        ));
+    }
+    let n = points.len() as f64;
+    let mean = points.iter().fold([0.0; 3], |m, p| {
+        [m[0] + p[0] / n, m[1] + p[1] / n, m[2] + p[2] / n]
+    });
+    let mut cov = Matrix3::<f64>::zeros();
+    for p in points {
+        let d = nalgebra::Vector3::new(p[0] - mean[0], p[1] - mean[1], p[2] - mean[2]);
+        cov += d * d.transpose() / n;
+    }
+    let mut spread: Vec<f64> = SymmetricEigen::new(cov)
+        .eigenvalues
+        .iter()
+        .map(|v| v.max(0.0).sqrt())
+        .collect();
+    spread.sort_by(f64::total_cmp);
+    // Spreads are standard deviations in the unit box: a car's are about 0.1, 0.15 and 0.3.
+    if spread[1] < 0.02 {
+        warnings.push(
+            "the points form a thin line (a pole, a wire, a single scan line?), not a vehicle"
+                .to_string(),
+        );
+    } else if spread[0] < 0.003 {
+        warnings.push(
+            "the points lie in one plane (a wall, one side only?): the model expects a 3D vehicle"
+                .to_string(),
+        );
+    }
+    warnings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::datagen::shapes::{example_car, scanned_side};
+    use crate::model::weights::generator_to_bytes;
+    use crate::model::Preset;
+    use burn::tensor::Device;
+
+    fn options(method: Method) -> Options {
+        Options {
+            method,
+            smooth: 5,
+            merge_pixels: 2.0,
+            symmetry: false,
+            ..Options::default()
+        }
+    }
+
+    /// The example car's scanned side, moved to georeferenced coordinates.
+    fn partial() -> PointCloud {
+        let mut cloud = scanned_side(&example_car());
+        for p in &mut cloud.positions {
+            p[0] += 650_000.0;
+            p[2] += 5_270_000.0;
+        }
+        cloud
+    }
+
+    fn tiny_inpainter() -> Inpainter {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        Inpainter::from_bytes(&generator_to_bytes(&g, &config).unwrap(), device).unwrap()
+    }
+
+    fn flags(cloud: &PointCloud) -> &[f64] {
+        &cloud.attribute(SYNTHETIC).unwrap().values
+    }
+
+    /// `--paper` is the paper's steps in the paper's order and nothing else: the same stage
+    /// functions composed by hand give the same points, to the bit.
+    #[test]
+    fn the_paper_pipeline_is_its_steps_and_nothing_else() {
+        let input = partial();
+        let inpainter = tiny_inpainter();
+        let options = Options::paper(UpAxis::Y, None);
+        let done = complete(&input, Some(&inpainter), &options).unwrap();
+
+        let frame = Frame::fit(&input, UpAxis::Y).unwrap();
+        let points: Vec<[f32; 3]> = input
+            .positions
+            .iter()
+            .map(|&p| frame.to_normalized(p).map(|c| c as f32))
+            .collect();
+        let cameras = Camera::set(&options.views, inpainter.config().size).unwrap();
+        let views = project(&points, input.colors.as_deref(), &cameras);
+        let inpainted = inpainter.inpaint(&[views]).unwrap().pop().unwrap();
+        let eroded = reproject(&inpainted, ReprojectOptions::default());
+        let kept = eroded.filter(&inliers(&eroded.positions, SorParams::default()));
+        let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
+
+        assert_eq!(done.cloud.positions, expected);
+        assert!(
+            done.plane.is_none() && done.mirrored == 0,
+            "no symmetry search"
+        );
+        assert!(
+            flags(&done.cloud).iter().all(|&f| f == 1.0),
+            "no measured point kept"
+        );
+        assert_eq!(ReprojectOptions::default().erode, 3);
+        assert_eq!((options.sor.k, options.sor.std_mul), (20, 5.0));
+    }
+
+    #[test]
+    fn identity_keeps_the_input_and_flags_nothing() {
+        let input = partial();
+        let done = complete(&input, None, &options(Method::Identity)).unwrap();
+        assert_eq!(done.cloud.positions, input.positions);
+        assert_eq!(done.added, 0);
+        assert!(flags(&done.cloud).iter().all(|&f| f == 0.0));
+    }
+
+    #[test]
+    fn mirror_adds_the_far_side_in_the_input_frame() {
+        let input = partial();
+        let done = complete(&input, None, &options(Method::Mirror)).unwrap();
+        assert_eq!(&done.cloud.positions[..input.len()], &input.positions[..]);
+        // The mirror adds the far flank, as many points as the near flank (x > 0.7 m) has.
+        let near = input
+            .positions
+            .iter()
+            .filter(|p| p[0] - 650_000.0 > 0.7)
+            .count();
+        assert!(
+            done.added.abs_diff(near) < near / 4,
+            "{} added for a near flank of {near}",
+            done.added
+        );
+        let f = flags(&done.cloud);
+        assert!(f[..input.len()].iter().all(|&v| v == 0.0));
+        assert!(f[input.len()..].iter().all(|&v| v == 1.0));
+        // The car spans x ∈ [−0.9, 0.9] m; the scan sees x > −0.6 m only; its mirror images
+        // reach the far flank, in the input's georeferenced coordinates.
+        let min_x = done.cloud.positions[input.len()..]
+            .iter()
+            .map(|p| p[0] - 650_000.0)
+            .fold(f64::MAX, f64::min);
+        assert!((min_x + 0.9).abs() < 0.05, "far flank at {min_x}");
+        assert_eq!(done.cloud.colors.as_ref().unwrap().len(), done.cloud.len());
+    }
+
+    #[test]
+    fn network_output_lands_in_the_input_frame_with_input_points_exact() {
+        let input = partial();
+        let inpainter = tiny_inpainter();
+        let opts = options(Method::Network);
+        let done = complete(&input, Some(&inpainter), &opts).unwrap();
+        assert_eq!(&done.cloud.positions[..input.len()], &input.positions[..]);
+        assert_eq!(done.cloud.len(), input.len() + done.added);
+        assert_eq!(done.normalized.len(), done.cloud.len());
+        for (p, q) in done
+            .cloud
+            .positions
+            .iter()
+            .zip(&done.normalized)
+            .skip(input.len())
+        {
+            let back = done.frame.to_input(*q);
+            for i in 0..3 {
+                assert!((p[i] - back[i]).abs() < 1e-6);
+            }
+        }
+        let opts = Options {
+            keep_input: false,
+            ..opts
+        };
+        let alone = complete(&input, Some(&inpainter), &opts).unwrap();
+        assert!(flags(&alone.cloud).iter().all(|&v| v == 1.0));
+    }
+
+    #[test]
+    fn refusals_and_warnings() {
+        let few = PointCloud::from_positions((0..20).map(|i| [i as f64, 0.0, 0.0]).collect());
+        assert!(matches!(
+            complete(&few, None, &options(Method::Identity)),
+            Err(CompleteError::TooFewPoints(20))
+        ));
+        let line = PointCloud::from_positions(
+            (0..300)
+                .map(|i| [i as f64 * 0.01, (i % 3) as f64 * 1e-4, 0.0])
+                .collect(),
+        );
+        let done = complete(&line, None, &options(Method::Identity)).unwrap();
+        assert_eq!(done.warnings.len(), 2, "{:?}", done.warnings);
+        assert!(done.warnings[1].contains("thin line"));
+        let car = complete(&partial(), None, &options(Method::Identity)).unwrap();
+        assert!(car.warnings.is_empty(), "{:?}", car.warnings);
+        let inpainter = tiny_inpainter();
+        let mut three = options(Method::Network);
+        three.views = vec![5, 6, 7];
+        assert!(matches!(
+            complete(&partial(), Some(&inpainter), &three),
+            Err(CompleteError::Views { model: 4, given: 3 })
+        ));
+    }
+}

@@ -1,0 +1,208 @@
+//! One mesh → ground truth, partial samples, their view images and clouds.
+
+use super::{
+    coarse, split_of, CloudPolicy, Layout, ModelEntry, PrepareParams, SampleEntry, Source,
+    DONE_FILE, GT_COARSE, GT_FINE, TEST,
+};
+use crate::core::camera::Camera;
+use crate::core::cloud::PointCloud;
+use crate::core::rng::{derive_seed, Lcg};
+use crate::datagen::mesh::{read_mesh, MeshError, ReadOptions, SignedAxis};
+use crate::datagen::raster::{render_views, Surface};
+use crate::datagen::scan::{ground_truth, partial};
+use crate::io::{atomic_write, write_cloud, CloudIoError, Encoding, Format};
+use crate::views::projection::project;
+use crate::views::{write_views, ViewError};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum PrepareError {
+    /// The mesh itself is unusable: reported and skipped.
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error("{}: {problem}", path.display())]
+    Normalize { path: PathBuf, problem: String },
+    /// Writing failed: the run stops, since the next model would fail the same way.
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Views(#[from] ViewError),
+    #[error(transparent)]
+    Cloud(#[from] CloudIoError),
+}
+
+impl PrepareError {
+    /// Whether the problem lies in the input file (skip it) rather than in the output.
+    pub fn is_input_problem(&self) -> bool {
+        matches!(self, PrepareError::Mesh(_) | PrepareError::Normalize { .. })
+    }
+}
+
+fn cloud_of(surface: Surface) -> PointCloud {
+    let mut cloud =
+        PointCloud::from_positions(surface.points.iter().map(|p| p.map(|c| c as f64)).collect());
+    cloud.colors = Some(surface.colors);
+    cloud
+}
+
+fn create_dir(path: &Path) -> Result<(), PrepareError> {
+    std::fs::create_dir_all(path).map_err(|source| PrepareError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// A finished model's entry, read from its done marker; `None` when the model is not done.
+pub fn finished(layout: &Layout, source: &Source, params: &PrepareParams) -> Option<ModelEntry> {
+    let split = split_of(&source.category, &source.name, params.train_fraction);
+    let marker = layout
+        .clouds(split, &source.category, &source.name)
+        .join(DONE_FILE);
+    let text = std::fs::read_to_string(marker).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Removes whatever an interrupted run left of a model.
+fn clear(layout: &Layout, split: &str, source: &Source) -> Result<(), PrepareError> {
+    for dir in [
+        layout.gt_views(split, &source.category, &source.name),
+        layout.inputs(split, &source.category, &source.name),
+        layout.clouds(split, &source.category, &source.name),
+    ] {
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|source| PrepareError::Write {
+                path: dir.clone(),
+                source,
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// Prepares one model: normalizes the mesh, samples its ground truth, scans `samples`
+/// partials, writes every view pair and cloud, and finally the done marker.
+pub fn prepare_model(
+    source: &Source,
+    params: &PrepareParams,
+    layout: &Layout,
+) -> Result<ModelEntry, PrepareError> {
+    let split = split_of(&source.category, &source.name, params.train_fraction);
+    // Whatever an interrupted run left goes first, so a mesh that now fails leaves nothing.
+    clear(layout, split, source)?;
+    let path = &source.path;
+    let mut mesh = read_mesh(
+        path,
+        ReadOptions {
+            allow_missing_materials: params.allow_missing_materials,
+        },
+    )?;
+    let stats = mesh.check(path, params.max_triangles)?;
+    let up: SignedAxis = params
+        .up
+        .parse()
+        .map_err(|problem| PrepareError::Normalize {
+            path: path.clone(),
+            problem,
+        })?;
+    let forward: SignedAxis =
+        params
+            .forward
+            .parse()
+            .map_err(|problem| PrepareError::Normalize {
+                path: path.clone(),
+                problem,
+            })?;
+    let scale = mesh
+        .normalize(up, forward)
+        .map_err(|problem| PrepareError::Normalize {
+            path: path.clone(),
+            problem,
+        })?;
+    let seed = derive_seed(params.seed, &format!("{}/{}", source.category, source.name));
+    let cameras = Camera::set(&params.views, params.size).map_err(|e| PrepareError::Normalize {
+        path: path.clone(),
+        problem: e.to_string(),
+    })?;
+
+    let gt = ground_truth(&mesh, params.gt_size, params.gt_voxel);
+    let gt_dir = layout.gt_views(split, &source.category, &source.name);
+    create_dir(&gt_dir)?;
+    write_views(&gt_dir, &render_views(&mesh, &cameras))?;
+
+    let clouds_dir = layout.clouds(split, &source.category, &source.name);
+    create_dir(&clouds_dir)?;
+    let keep_partials = match params.clouds {
+        CloudPolicy::All => true,
+        CloudPolicy::Test => split == TEST,
+        CloudPolicy::Gt => false,
+    };
+    let samples = (1..=params.samples)
+        .into_par_iter()
+        .map(|k| {
+            let sample_seed = derive_seed(seed, &k.to_string());
+            let mut rng = Lcg::new(sample_seed);
+            let (spec, surface) = partial(&mesh, &params.partial, &mut rng);
+            let dir = layout.input_views(split, &source.category, &source.name, k);
+            create_dir(&dir)?;
+            let views = project(&surface.points, Some(&surface.colors), &cameras);
+            write_views(&dir, &views)?;
+            let points = surface.len();
+            if keep_partials {
+                write_cloud(
+                    &clouds_dir.join(format!("partial_{k}.ply")),
+                    &cloud_of(surface),
+                    Some(Format::Ply),
+                    Encoding::Binary,
+                )?;
+            }
+            Ok(SampleEntry {
+                k,
+                seed: sample_seed,
+                points,
+                spec,
+            })
+        })
+        .collect::<Result<Vec<_>, PrepareError>>()?;
+    let gt_points = gt.len();
+    let gt_cloud = cloud_of(gt);
+    write_cloud(
+        &clouds_dir.join(GT_FINE),
+        &gt_cloud,
+        Some(Format::Ply),
+        Encoding::Binary,
+    )?;
+    // Beside the partials `eval` scores: sampling is quadratic, so not for models nobody scores.
+    if keep_partials {
+        write_cloud(
+            &clouds_dir.join(GT_COARSE),
+            &coarse(&gt_cloud),
+            Some(Format::Ply),
+            Encoding::Binary,
+        )?;
+    }
+    let entry = ModelEntry {
+        category: source.category.clone(),
+        name: source.name.clone(),
+        split: split.to_string(),
+        source: source.path.clone(),
+        seed,
+        source_scale: 1.0 / scale,
+        mesh: stats,
+        gt_points,
+        samples,
+    };
+    let marker = clouds_dir.join(DONE_FILE);
+    atomic_write(&marker, |w| {
+        serde_json::to_writer_pretty(&mut *w, &entry).map_err(std::io::Error::other)
+    })
+    .map_err(|source| PrepareError::Write {
+        path: marker.clone(),
+        source,
+    })?;
+    Ok(entry)
+}

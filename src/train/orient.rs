@@ -1,0 +1,273 @@
+//! Training the orientation network (`mvpcc train-orient`): partial samples of a
+//! "shapenet-views" directory, decoded back to points (they are in the canonical pose, heading
+//! 90°), turned by a random yaw, and the network learns the turned heading.
+
+use crate::complete::orient::net::{sample_points, target, Orienter, OrienterConfig, OrienterNet};
+use crate::complete::orient::{angle_between, heading_of_turn};
+use crate::core::rng::{derive_seed, Lcg};
+use crate::train::dataset::{hold_back, scan_split, Cache, DataError, SampleRef};
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum OrientTrainError {
+    #[error(transparent)]
+    Data(#[from] DataError),
+    #[error("{}: no validation samples: no test split and too few models to hold back", .0.display())]
+    NoValidation(PathBuf),
+    /// The monitor could not record a step (its log cannot be written): the run stops.
+    #[error("cannot record step {step}: {source}")]
+    Monitor { step: u64, source: std::io::Error },
+}
+
+/// What shapes a run; saved beside the weights as `train-orient.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OrientSettings {
+    /// Rig cameras whose view images are decoded into the partial's points.
+    pub views: Vec<usize>,
+    pub batch: usize,
+    pub steps: u64,
+    pub learning_rate: f64,
+    /// Validation samples (each at a fixed random yaw).
+    pub val_samples: usize,
+    pub val_every: u64,
+    /// Standard deviation of the noise added to every coordinate (normalized units).
+    pub noise: f64,
+    pub seed: u64,
+}
+
+impl Default for OrientSettings {
+    fn default() -> Self {
+        OrientSettings {
+            views: crate::core::camera::DEFAULT_VIEWS.to_vec(),
+            batch: 32,
+            steps: 4000,
+            learning_rate: 1e-3,
+            val_samples: 256,
+            val_every: 250,
+            noise: 0.003,
+            seed: 0,
+        }
+    }
+}
+
+/// Heading errors on the validation samples.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OrientScores {
+    /// Degrees.
+    pub median: f64,
+    pub p95: f64,
+    /// Share with the front and back swapped (error over 90°).
+    pub flips: f64,
+}
+
+impl OrientScores {
+    pub fn of(errors: &mut [f64]) -> OrientScores {
+        errors.sort_by(f64::total_cmp);
+        let at = |q: f64| {
+            errors
+                .get(((errors.len() as f64 - 1.0) * q).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        OrientScores {
+            median: at(0.5),
+            p95: at(0.95),
+            flips: errors.iter().filter(|&&e| e > 90.0).count() as f64 / errors.len().max(1) as f64,
+        }
+    }
+}
+
+/// One line of progress.
+#[derive(Debug, Clone, Serialize)]
+pub struct OrientRecord {
+    pub step: u64,
+    pub loss: f32,
+    pub validation: Option<OrientScores>,
+}
+
+/// A partial's points turned about the vertical by `turn` degrees (heading 90° + `turn`), with
+/// noise.
+fn turned(points: &[[f64; 3]], turn: f64, noise: f64, rng: &mut Lcg) -> Vec<[f64; 3]> {
+    let (s, c) = turn.to_radians().sin_cos();
+    points
+        .iter()
+        .map(|&[x, y, z]| {
+            let mut p = [c * x + s * z, y, -s * x + c * z];
+            for v in &mut p {
+                *v += noise * rng.gauss();
+            }
+            p
+        })
+        .collect()
+}
+
+/// The training and validation samples: the test split when the data has one, else held-back
+/// models.
+pub struct OrientData {
+    root: PathBuf,
+    train: Vec<SampleRef>,
+    validation: Vec<SampleRef>,
+}
+
+impl OrientData {
+    /// Lists the samples without decoding any, so a command can refuse bad data before it
+    /// creates its run directory.
+    pub fn scan(data: &Path) -> Result<OrientData, OrientTrainError> {
+        let train = scan_split(data, "train")?.samples;
+        match scan_split(data, "test") {
+            Ok(test) => Ok(OrientData {
+                root: data.to_path_buf(),
+                train,
+                validation: test.samples,
+            }),
+            Err(DataError::NotViews { .. }) | Err(DataError::Empty { .. }) => {
+                let (train, validation) = hold_back(train, 0.05);
+                if validation.is_empty() {
+                    return Err(OrientTrainError::NoValidation(data.to_path_buf()));
+                }
+                Ok(OrientData {
+                    root: data.to_path_buf(),
+                    train,
+                    validation,
+                })
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+}
+
+/// Trains an orientation network, decoding samples into a cache of `cache_bytes`; `monitor`
+/// records each step, and an error from it stops the run with that error. Returns the network
+/// with the best validation median.
+pub fn train_orienter(
+    data: &OrientData,
+    config: &OrienterConfig,
+    settings: &OrientSettings,
+    device: &Device,
+    cache_bytes: usize,
+    mut monitor: impl FnMut(&OrientRecord) -> std::io::Result<()>,
+) -> Result<(Orienter, OrientScores), OrientTrainError> {
+    let (train, validation) = (&data.train, &data.validation);
+    let cache = Arc::new(Cache::new(cache_bytes));
+    let load = |s: &SampleRef| -> Result<Vec<[f64; 3]>, DataError> {
+        Ok(cache.get(&s.input, &settings.views)?.points())
+    };
+    let mut val_rng = Lcg::new(derive_seed(settings.seed, "orient validation"));
+    let stride = validation
+        .len()
+        .div_ceil(settings.val_samples.max(1))
+        .max(1);
+    let mut val_set = Vec::new();
+    for s in validation.iter().step_by(stride) {
+        let points = load(s)?;
+        if points.len() < 10 {
+            continue;
+        }
+        let turn = val_rng.range(-180.0, 180.0);
+        let points = turned(&points, turn, 0.0, &mut val_rng);
+        val_set.push((points, heading_of_turn(turn)));
+    }
+    if val_set.is_empty() {
+        return Err(OrientTrainError::NoValidation(data.root.clone()));
+    }
+
+    let autodiff = device.clone().autodiff();
+    let mut net = OrienterNet::new(config, &autodiff);
+    let mut optim = AdamConfig::new().init();
+    let n = config.points;
+    let mut best: Option<(OrienterNet, OrientScores)> = None;
+    let score = |net: &OrienterNet| {
+        let orienter = Orienter::new(net.valid(), config.clone(), device.clone());
+        let mut errors: Vec<f64> = val_set
+            .iter()
+            .map(|(points, heading)| angle_between(orienter.heading(points), *heading))
+            .collect();
+        OrientScores::of(&mut errors)
+    };
+    let mut draw = Lcg::new(derive_seed(settings.seed, "orient draws"));
+    for step in 1..=settings.steps {
+        let mut inputs = Vec::with_capacity(settings.batch * n * 3);
+        let mut targets = Vec::with_capacity(settings.batch * 4);
+        let mut filled = 0;
+        while filled < settings.batch {
+            let points = load(&train[draw.below(train.len())])?;
+            if points.len() < 10 {
+                continue;
+            }
+            let turn = draw.range(-180.0, 180.0);
+            let points = turned(&points, turn, settings.noise, &mut draw);
+            inputs.extend(sample_points(&points, n, &mut draw));
+            targets.extend(target(heading_of_turn(turn)));
+            filled += 1;
+        }
+        let b = settings.batch;
+        // [batch, N, 3]
+        let x = Tensor::<3>::from_data(TensorData::new(inputs, [b, n, 3]), &autodiff);
+        // [batch, 4]
+        let y = Tensor::<2>::from_data(TensorData::new(targets, [b, 4]), &autodiff);
+        let loss = (net.forward(x) - y).powi_scalar(2).mean();
+        let value = loss
+            .clone()
+            .into_data()
+            .try_into_vec::<f32>()
+            .ok()
+            .and_then(|v| v.first().copied())
+            .unwrap_or(f32::NAN);
+        let grads = GradientsParams::from_grads(loss.backward(), &net);
+        net = optim.step(settings.learning_rate, net, grads);
+
+        let validation = (settings.val_every > 0
+            && (step % settings.val_every == 0 || step == settings.steps))
+            .then(|| score(&net));
+        if let Some(scores) = validation {
+            if best.as_ref().is_none_or(|(_, b)| scores.median < b.median) {
+                best = Some((net.clone(), scores));
+            }
+        }
+        monitor(&OrientRecord {
+            step,
+            loss: value,
+            validation,
+        })
+        .map_err(|source| OrientTrainError::Monitor { step, source })?;
+    }
+    let (net, scores) = match best {
+        Some(b) => b,
+        None => {
+            let scores = score(&net);
+            (net, scores)
+        }
+    };
+    Ok((
+        Orienter::new(net.valid(), config.clone(), device.clone()),
+        scores,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scores_count_flips_and_quantiles() {
+        let mut errors = vec![1.0, 2.0, 3.0, 170.0, 4.0];
+        let s = OrientScores::of(&mut errors);
+        assert_eq!(s.median, 3.0);
+        assert_eq!(s.p95, 170.0);
+        assert!((s.flips - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn turning_moves_the_front() {
+        // The canonical front (−z) turned a quarter counter-clockwise faces −x: heading 180°.
+        let p = turned(&[[0.0, 0.0, -1.0]], 90.0, 0.0, &mut Lcg::new(0))[0];
+        assert!((p[0] + 1.0).abs() < 1e-12 && p[2].abs() < 1e-12, "{p:?}");
+        assert_eq!(heading_of_turn(90.0), 180.0);
+    }
+}

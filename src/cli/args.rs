@@ -2,8 +2,9 @@
 //! here; what they do lives in [`crate::cli::commands`].
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
-use mvpcc::complete::Method;
+use mvpcc::complete::{Method, Options};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -83,16 +84,16 @@ pub struct OutputOptions {
 pub struct SorOptions {
     /// Neighbours per point for the outlier filter, excluding the point itself (PCL's mean_k;
     /// Open3D's nb_neighbors is this + 1). 0 turns the filter off.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = SorParams::DEFAULT.k)]
     pub sor_k: usize,
     /// Points whose mean neighbour distance exceeds mean + this × std are removed.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = SorParams::DEFAULT.std_mul)]
     pub sor_std: f64,
 }
 
 impl SorOptions {
-    pub fn params(&self) -> mvpcc::complete::filter::SorParams {
-        mvpcc::complete::filter::SorParams {
+    pub fn params(&self) -> SorParams {
+        SorParams {
             k: self.sor_k,
             std_mul: self.sor_std,
         }
@@ -289,10 +290,10 @@ pub struct CompleteArgs {
     #[arg(long, overrides_with = "symmetry")]
     pub no_symmetry: bool,
     /// Erosion element side for the inpainted views (pixels); 0 = off.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = Options::default().erode)]
     pub erode: usize,
     /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = Options::default().smooth)]
     pub smooth: usize,
     /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray
     /// at the predicted depth.
@@ -301,7 +302,7 @@ pub struct CompleteArgs {
     #[command(flatten)]
     pub sor: SorOptions,
     /// A completed point within this many model pixels of a measured one is not added.
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = Options::default().merge_pixels)]
     pub merge_pixels: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "output_dir")]
@@ -559,8 +560,8 @@ pub struct TrainArgs {
     /// Image channels the model reads and writes [default: xyzrgb].
     #[arg(long, value_enum)]
     pub channels: Option<Channels>,
-    /// Model shape: paper, default (the CPU preset), small, tiny, or a JSON file holding a
-    /// model config (as a run's config.json) [default: default].
+    /// Model shape: a preset (cpu, paper, small, tiny) or a JSON file holding a model config
+    /// (as a run's config.json) [default: cpu].
     #[arg(long)]
     pub config: Option<String>,
     /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).

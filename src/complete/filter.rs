@@ -12,12 +12,17 @@ pub struct SorParams {
     pub std_mul: f64,
 }
 
+impl SorParams {
+    /// PCL's usual settings, the paper's: 20 neighbours, 5 standard deviations.
+    pub const DEFAULT: SorParams = SorParams {
+        k: 20,
+        std_mul: 5.0,
+    };
+}
+
 impl Default for SorParams {
     fn default() -> Self {
-        SorParams {
-            k: 20,
-            std_mul: 5.0,
-        }
+        SorParams::DEFAULT
     }
 }
 

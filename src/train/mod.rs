@@ -118,9 +118,12 @@ impl InitWeights {
     /// The model config the generator's file declares.
     pub fn config(&self) -> Result<ModelConfig, TrainError> {
         let bytes = read_file(&self.generator)?;
-        weights::read_config(&bytes, weights::Network::Generator).map_err(|e| TrainError::Run {
-            path: self.generator.clone(),
-            problem: e.to_string(),
+        weights::read_config(&bytes, weights::Network::Generator).map_err(|source| {
+            TrainError::Weights {
+                path: self.generator.clone(),
+                context: "",
+                source,
+            }
         })
     }
 
@@ -134,9 +137,10 @@ impl InitWeights {
             let Some(path) = path else { continue };
             weights::read_config(&read_file(path)?, network)
                 .and_then(|found| weights::compatible(&found, config))
-                .map_err(|e| TrainError::Run {
+                .map_err(|source| TrainError::Weights {
                     path: path.clone(),
-                    problem: format!("--init: {e}"),
+                    context: "--init: ",
+                    source,
                 })?;
         }
         Ok(())
@@ -147,9 +151,10 @@ impl InitWeights {
         let config = &job.model;
         let fail = |path: &Path| {
             let path = path.to_path_buf();
-            move |e: weights::WeightsError| TrainError::Run {
+            move |source| TrainError::Weights {
                 path,
-                problem: format!("--init: {e}"),
+                context: "--init: ",
+                source,
             }
         };
         let generator = weights::generator_for(&read_file(&self.generator)?, config, device)
@@ -160,9 +165,9 @@ impl InitWeights {
             }
             None => config
                 .init_discriminator(device)
-                .map_err(|e| TrainError::Run {
+                .map_err(|source| TrainError::Config {
                     path: self.generator.clone(),
-                    problem: e.to_string(),
+                    source,
                 })?,
         };
         Ok(Gan::from_parts(
@@ -228,6 +233,23 @@ pub enum TrainError {
     },
     #[error("{}: {problem}", path.display())]
     Run { path: PathBuf, problem: String },
+    /// A weights file (`--init`, `--vgg19`) that cannot be used; `context` names the option.
+    #[error("{}: {context}{source}", path.display())]
+    Weights {
+        path: PathBuf,
+        context: &'static str,
+        source: weights::WeightsError,
+    },
+    #[error("{}: {source}", path.display())]
+    Config {
+        path: PathBuf,
+        source: crate::model::ConfigError,
+    },
+    #[error("{}: {source}", path.display())]
+    Camera {
+        path: PathBuf,
+        source: crate::core::camera::CameraError,
+    },
     #[error(
         "the {term} loss is {value} at step {step}; stopped without saving, {}",
         last_good.as_ref().map_or("no checkpoint was written yet".to_string(),

@@ -44,9 +44,9 @@ impl<'a> Session<'a> {
         let (train_samples, val_samples, what) = samples(&job.data, settings.val_fraction)?;
         monitor.message(&what);
         let cameras =
-            Camera::set(&settings.views, job.model.size).map_err(|e| TrainError::Run {
+            Camera::set(&settings.views, job.model.size).map_err(|source| TrainError::Camera {
                 path: job.data.clone(),
-                problem: e.to_string(),
+                source,
             })?;
         let cache = Arc::new(Cache::new(job.cache_bytes));
         let data_size = cache.get(&train_samples[0].gt, &settings.views)?.size;
@@ -292,9 +292,10 @@ fn load_vgg(
     let Some(path) = &job.settings.vgg19 else {
         return Ok(None);
     };
-    let vgg = Vgg19::load(path, autodiff).map_err(|e| TrainError::Run {
+    let vgg = Vgg19::load(path, autodiff).map_err(|source| TrainError::Weights {
         path: path.clone(),
-        problem: e.to_string(),
+        context: "",
+        source,
     })?;
     monitor.message(&format!(
         "perceptual and style terms on VGG19 features from {}",
@@ -357,9 +358,9 @@ fn fresh_gan(job: &Job, autodiff: &Device, monitor: &mut dyn Monitor) -> Result<
             settings.optim.clone(),
             autodiff,
         )
-        .map_err(|e| TrainError::Run {
+        .map_err(|source| TrainError::Config {
             path: job.run.clone(),
-            problem: e.to_string(),
+            source,
         });
     };
     let gan = init.load(job, autodiff)?;

@@ -4,7 +4,6 @@ use crate::cli::args::CompleteArgs;
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
 use mvpcc::complete::clean::CleanReport;
-use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::{OrientMode, Orienter, DEFAULT_ORIENTER};
 use mvpcc::complete::preview::{render, Layer};
 use mvpcc::complete::{
@@ -117,10 +116,7 @@ fn settings(args: &CompleteArgs, input: &Path) -> Settings {
 
 fn options(args: &CompleteArgs, input: &Path) -> Options {
     let up = up_axis(args, input);
-    let sor = SorParams {
-        k: args.sor.sor_k,
-        std_mul: args.sor.sor_std,
-    };
+    let sor = args.sor.params();
     if args.paper {
         return Options {
             views: args.views.0.clone(),

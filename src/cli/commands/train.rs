@@ -4,6 +4,7 @@
 use super::Log;
 use crate::cli::args::TrainArgs;
 use anyhow::{bail, Context};
+use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use mvpcc::core::camera::DEFAULT_VIEWS;
 use mvpcc::model::device::open;
@@ -21,22 +22,15 @@ use std::sync::Arc;
 /// what it computes.
 const OPERATIONAL: [&str; 2] = ["log_every", "keep"];
 
+/// `--config`: a preset's name (`cpu`, the CPU default; `paper`, `small`, `tiny`) or a JSON
+/// file holding a model config.
 fn model_config(name: &str) -> anyhow::Result<ModelConfig> {
-    let preset = match name {
-        "paper" => Some(Preset::Paper),
-        "default" | "cpu" => Some(Preset::Cpu),
-        "small" => Some(Preset::Small),
-        "tiny" => Some(Preset::Tiny),
-        _ => None,
-    };
-    if let Some(p) = preset {
-        return Ok(p.config());
+    if let Ok(preset) = Preset::from_str(name, true) {
+        return Ok(preset.config());
     }
     let path = Path::new(name);
     let text = std::fs::read_to_string(path).with_context(|| {
-        format!(
-            "--config {name}: neither a preset (paper, default, small, tiny) nor a readable file"
-        )
+        format!("--config {name}: neither a preset (cpu, paper, small, tiny) nor a readable file")
     })?;
     let config: ModelConfig = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a model config", path.display()))?;
@@ -179,7 +173,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         let base = match (&args.config, &settings.init) {
             (Some(name), _) => model_config(name)?,
             (None, Some(init)) => init.config()?,
-            (None, None) => model_config("default")?,
+            (None, None) => Preset::Cpu.config(),
         };
         (settings, fresh_model(base))
     };

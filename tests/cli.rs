@@ -49,15 +49,12 @@ fn fails(args: &[&str], names: &str, problem: &str, output: &Path) {
 
 /// Runs `mvpcc eval … --json` and parses what it prints.
 fn eval_json(args: &[&str]) -> serde_json::Value {
-    let out = mvpcc()
-        .arg("eval")
-        .args(args)
-        .arg("--json")
-        .assert()
-        .success()
-        .get_output()
-        .stdout
-        .clone();
+    json_of_success(mvpcc().arg("eval").args(args).arg("--json"))
+}
+
+/// Runs `cmd`, expects success and parses its stdout as JSON.
+fn json_of_success(cmd: &mut Command) -> serde_json::Value {
+    let out = cmd.assert().success().get_output().stdout.clone();
     serde_json::from_slice(&out).unwrap()
 }
 
@@ -642,19 +639,15 @@ fn prepare_shards_share_one_folder_and_a_last_run_writes_the_manifest() {
         .success();
     let data = dir.path().join("data");
     let prepare = |extra: &[&str]| -> serde_json::Value {
-        let out = mvpcc()
-            .args(["prepare", "--json", "--out"])
-            .arg(&data)
-            .arg("--meshes")
-            .arg(&meshes)
-            .args(SMALL)
-            .args(extra)
-            .assert()
-            .success()
-            .get_output()
-            .stdout
-            .clone();
-        serde_json::from_slice(&out).unwrap()
+        json_of_success(
+            mvpcc()
+                .args(["prepare", "--json", "--out"])
+                .arg(&data)
+                .arg("--meshes")
+                .arg(&meshes)
+                .args(SMALL)
+                .args(extra),
+        )
     };
     let first = prepare(&["--shard", "0/2"]);
     let second = prepare(&["--shard", "1/2"]);

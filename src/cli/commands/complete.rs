@@ -13,7 +13,7 @@ use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::UpAxis;
 use mvpcc::io::batch::{self, read_list, walk};
 use mvpcc::io::{atomic_write, check_output, write_cloud, Format};
-use mvpcc::model::device::{open, DeviceChoice};
+use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::views::write_views;
 use serde::Serialize;
@@ -50,10 +50,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
 
 /// The generator from `--model` (a weights file or a run directory) or the built-in one.
 fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Result<Inpainter> {
-    let opened = open(device)?;
-    if let Some(why) = &opened.fallback {
-        log.warn(why);
-    }
+    let opened = super::open_device(device, log)?;
     let inpainter = match path {
         Some(path) => {
             let file = if path.is_dir() {

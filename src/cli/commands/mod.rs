@@ -14,6 +14,7 @@ mod train_orient;
 use crate::cli::args::{Cli, Command};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::io::{read_cloud, Format};
+use mvpcc::model::device::{open, DeviceChoice, Opened};
 use std::fmt::Display;
 use std::path::Path;
 
@@ -53,6 +54,15 @@ impl Log {
     pub fn quiet(&self) -> bool {
         self.quiet
     }
+}
+
+/// Opens the device `--device` asks for, warning once when it falls back to the CPU.
+pub(crate) fn open_device(choice: DeviceChoice, log: Log) -> anyhow::Result<Opened> {
+    let opened = open(choice)?;
+    if let Some(why) = &opened.fallback {
+        log.warn(why);
+    }
+    Ok(opened)
 }
 
 /// Reads a cloud, warning about points dropped for NaN or infinite coordinates.

@@ -7,7 +7,6 @@ use super::Log;
 use crate::cli::args::ProfileArgs;
 use anyhow::Context;
 use burn::tensor::{Device, Distribution, Tensor};
-use mvpcc::model::device::open;
 use mvpcc::model::gan::{Batch, Gan, GanOptimConfig, StepClock, StepPhase};
 use mvpcc::model::loss::LossWeights;
 use mvpcc::model::{LayerKind, ModelConfig, Probe};
@@ -45,10 +44,7 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
     config.validate().context("model config")?;
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
-    let opened = open(args.device)?;
-    if let Some(why) = &opened.fallback {
-        log.warn(why);
-    }
+    let opened = super::open_device(args.device, log)?;
     args.layers.set();
     log.info(format!(
         "profiling {} of {:?} on {}: {}, batch {}, {:?} layers",

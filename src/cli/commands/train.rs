@@ -7,7 +7,6 @@ use anyhow::{bail, Context};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
 use mvpcc::core::camera::DEFAULT_VIEWS;
-use mvpcc::model::device::open;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{ModelConfig, Preset};
 use mvpcc::train::{
@@ -258,10 +257,7 @@ fn default_run(data: &Path) -> PathBuf {
 pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     let run = args.out.clone().unwrap_or_else(|| default_run(&args.data));
     let (settings, model) = resolve(&args, &run)?;
-    let opened = open(args.device)?;
-    if let Some(why) = &opened.fallback {
-        log.warn(why);
-    }
+    let opened = super::open_device(args.device, log)?;
     log.info(format!(
         "training {} ({} views of {}², width {}, {} residual blocks, {:?}) on {} into {}",
         args.data.display(),

@@ -7,7 +7,6 @@ use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use mvpcc::complete::orient::OrienterConfig;
 use mvpcc::io::atomic_write;
-use mvpcc::model::device::open;
 use mvpcc::train::orient::{train_orienter, OrientData, OrientSettings, OrientTrainError};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -48,10 +47,7 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
         &out.join("train-orient.json"),
         serde_json::to_string_pretty(&settings)?.as_bytes(),
     )?;
-    let opened = open(args.device)?;
-    if let Some(why) = &opened.fallback {
-        log.warn(why);
-    }
+    let opened = super::open_device(args.device, log)?;
     log.info(format!(
         "training the orientation network on {} ({}), {} steps of {}",
         args.data.display(),

@@ -101,7 +101,42 @@ fn check_evlrs(path: &Path) -> Result<(), Problem> {
     Ok(())
 }
 
+/// Refuses a LAZ file whose LASzip description lists no point items, on which the laz crate
+/// panics. Only the header and the VLRs are read.
+fn check_laszip_items(path: &Path) -> Result<(), Problem> {
+    use std::io::{Read, Seek, SeekFrom};
+    const VLR_HEADER: usize = 54;
+    let mut file = std::fs::File::open(path)?;
+    let mut header = [0u8; 105];
+    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" || header[104] & 0x80 == 0 {
+        return Ok(());
+    }
+    let mut at = u64::from(u16::from_le_bytes([header[94], header[95]]));
+    let count = u32::from_le_bytes([header[100], header[101], header[102], header[103]]);
+    let mut vlr = [0u8; VLR_HEADER + 34];
+    for _ in 0..count {
+        if file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut vlr).is_err() {
+            return Ok(());
+        }
+        let record_id = u16::from_le_bytes([vlr[18], vlr[19]]);
+        let length = u64::from(u16::from_le_bytes([vlr[20], vlr[21]]));
+        if vlr[2..16].starts_with(b"laszip encoded") && record_id == 22204 {
+            // The item count follows 32 bytes of versions, options and sizes.
+            let items = u16::from_le_bytes([vlr[VLR_HEADER + 32], vlr[VLR_HEADER + 33]]);
+            if items == 0 {
+                return Err(Problem::Malformed(
+                    "its LASzip description lists no point items".into(),
+                ));
+            }
+            return Ok(());
+        }
+        at += VLR_HEADER as u64 + length;
+    }
+    Ok(())
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
+    check_laszip_items(path)?;
     check_chunk_table(path)?;
     check_evlrs(path)?;
     let file = std::fs::File::open(path)?;

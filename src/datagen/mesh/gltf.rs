@@ -83,6 +83,16 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
                 })
                 .collect();
             let n = positions.len() as u32;
+            // The gltf crate panics on indices that are not unsigned integers.
+            if let Some(accessor) = primitive.indices() {
+                use ::gltf::accessor::DataType;
+                let kind = accessor.data_type();
+                if !matches!(kind, DataType::U8 | DataType::U16 | DataType::U32) {
+                    return Err(fail(format!(
+                        "triangle indices stored as {kind:?}, not unsigned integers"
+                    )));
+                }
+            }
             let indices: Vec<u32> = match reader.read_indices() {
                 Some(i) => i.into_u32().collect(),
                 None => (0..n).collect(),

@@ -483,6 +483,40 @@ fn a_run_killed_three_times_resumes_and_finishes() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 
+/// A full disk, emulated by a file-size limit with its signal ignored (so a write past it fails
+/// with "File too large" as one past a full disk fails with "No space left"): the checkpoint
+/// that cannot be written is an error, and the run resumes from the one before.
+#[cfg(unix)]
+#[test]
+fn a_checkpoint_that_cannot_be_written_is_an_error_and_keeps_the_previous_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let quiet = ["--val-every", "0"];
+    train(&run, 4, &quiet).assert().success();
+    let mut limited = std::process::Command::new("sh");
+    limited
+        .arg("-c")
+        .arg("trap '' XFSZ; ulimit -f 32 && exec \"$0\" \"$@\"")
+        .arg(assert_cmd::cargo::cargo_bin("mvpcc"))
+        .args(train(&run, 8, &quiet).get_args())
+        .arg("--resume");
+    let output = limited.output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    let last = stderr.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("error: ") && last.contains("checkpoints") && last.contains("too large"),
+        "{stderr}"
+    );
+    let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
+    assert_eq!(latest.trim(), "step-00000004");
+    train(&run, 8, &quiet)
+        .arg("--resume")
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("stopped at step 8"));
+}
+
 #[test]
 fn the_reference_bus_trains_without_a_validation_split() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/views");

@@ -4,6 +4,7 @@
 
 use super::{check_points, Problem};
 use crate::core::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
+use crate::core::guard::guarded;
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};
@@ -101,44 +102,78 @@ fn check_evlrs(path: &Path) -> Result<(), Problem> {
     Ok(())
 }
 
-/// Refuses a LAZ file whose LASzip description lists no point items, on which the laz crate
-/// panics. Only the header and the VLRs are read.
+/// Refuses a LAZ file whose LASzip description lists no point items, or items that do not add
+/// up to the header's point record: the laz crate panics on both. Only the header and the VLRs
+/// are read.
 fn check_laszip_items(path: &Path) -> Result<(), Problem> {
     use std::io::{Read, Seek, SeekFrom};
     const VLR_HEADER: usize = 54;
     let mut file = std::fs::File::open(path)?;
-    let mut header = [0u8; 105];
+    let mut header = [0u8; 107];
     if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" || header[104] & 0x80 == 0 {
         return Ok(());
     }
+    let record = u16::from_le_bytes([header[105], header[106]]);
     let mut at = u64::from(u16::from_le_bytes([header[94], header[95]]));
     let count = u32::from_le_bytes([header[100], header[101], header[102], header[103]]);
-    let mut vlr = [0u8; VLR_HEADER + 34];
+    let mut vlr = [0u8; VLR_HEADER];
     for _ in 0..count {
         if file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut vlr).is_err() {
             return Ok(());
         }
         let record_id = u16::from_le_bytes([vlr[18], vlr[19]]);
-        let length = u64::from(u16::from_le_bytes([vlr[20], vlr[21]]));
+        let length = u16::from_le_bytes([vlr[20], vlr[21]]);
         if vlr[2..16].starts_with(b"laszip encoded") && record_id == 22204 {
-            // The item count follows 32 bytes of versions, options and sizes.
-            let items = u16::from_le_bytes([vlr[VLR_HEADER + 32], vlr[VLR_HEADER + 33]]);
-            if items == 0 {
-                return Err(Problem::Malformed(
-                    "its LASzip description lists no point items".into(),
-                ));
+            let mut data = vec![0u8; usize::from(length)];
+            if file.read_exact(&mut data).is_err() {
+                return Ok(());
             }
-            return Ok(());
+            return check_items(&data, record);
         }
-        at += VLR_HEADER as u64 + length;
+        at += VLR_HEADER as u64 + u64::from(length);
     }
     Ok(())
+}
+
+/// The LASzip description's point items must exist and add up to the header's point record
+/// length.
+fn check_items(data: &[u8], record: u16) -> Result<(), Problem> {
+    // The item count follows 32 bytes of versions, options and sizes; each item is 6 bytes.
+    let Some(count) = data
+        .get(32..34)
+        .map(|b| usize::from(u16::from_le_bytes([b[0], b[1]])))
+    else {
+        return Ok(());
+    };
+    if count == 0 {
+        return Err(Problem::Malformed(
+            "its LASzip description lists no point items".into(),
+        ));
+    }
+    let sizes: Option<u32> = (0..count)
+        .map(|i| data.get(34 + 6 * i + 2..34 + 6 * i + 4))
+        .map(|b| b.map(|b| u32::from(u16::from_le_bytes([b[0], b[1]]))))
+        .sum();
+    match sizes {
+        Some(total) if total != u32::from(record) => Err(Problem::Malformed(format!(
+            "its LASzip items describe {total}-byte points, its header {record}-byte ones"
+        ))),
+        _ => Ok(()),
+    }
 }
 
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     check_laszip_items(path)?;
     check_chunk_table(path)?;
     check_evlrs(path)?;
+    guarded(|| read_checked(path)).unwrap_or_else(|message| {
+        Err(Problem::Malformed(format!(
+            "the LAS/LAZ decoder failed on it ({message})"
+        )))
+    })
+}
+
+fn read_checked(path: &Path) -> Result<PointCloud, Problem> {
     let file = std::fs::File::open(path)?;
     let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
     let header = reader.header().clone();

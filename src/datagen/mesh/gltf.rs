@@ -2,6 +2,7 @@
 //! transforms, with base-colour factors, base-colour textures and COLOR_0.
 
 use super::{linear_to_srgb, Material, Mesh, MeshError};
+use crate::core::guard::guarded;
 use image::RgbImage;
 use nalgebra::{Matrix4, Point3};
 use std::path::Path;
@@ -38,6 +39,11 @@ fn check_glb_length(path: &Path) -> Result<(), String> {
         return Ok(());
     }
     let declared = u32::from_le_bytes(header[8..12].try_into().expect("4 bytes"));
+    if declared < 12 {
+        return Err(format!(
+            "GLB header declares {declared} bytes, fewer than the header itself"
+        ));
+    }
     if u64::from(declared) > size {
         return Err(format!(
             "GLB header declares {declared} bytes but the file holds only {size}"
@@ -52,6 +58,15 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
         problem,
     };
     check_glb_length(path).map_err(fail)?;
+    guarded(|| read_checked(path))
+        .unwrap_or_else(|message| Err(fail(format!("the glTF decoder failed on it ({message})"))))
+}
+
+fn read_checked(path: &Path) -> Result<Mesh, MeshError> {
+    let fail = |problem: String| MeshError::Read {
+        path: path.to_path_buf(),
+        problem,
+    };
     let (document, buffers, images) =
         ::gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
     let textures: Vec<Option<Arc<RgbImage>>> =

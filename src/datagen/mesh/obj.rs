@@ -2,6 +2,7 @@
 //! written directly for `mvpcc synth` (one `usemtl` group per material, `Kd` colours).
 
 use super::{Material, Mesh, MeshError, ReadOptions, TextureCache};
+use crate::core::guard::guarded;
 use crate::io::atomic_write;
 use std::io::Write;
 use std::path::Path;
@@ -35,11 +36,14 @@ pub fn read(path: &Path, options: ReadOptions) -> Result<Mesh, MeshError> {
         problem,
     };
     let file = std::fs::File::open(path).map_err(|_| read_error("cannot open the file".into()))?;
-    let (models, materials) =
+    let loaded = guarded(|| {
         tobj::load_obj_buf(&mut std::io::BufReader::new(file), &load, |mtl| {
             load_mtl(&dir.join(mtl))
         })
-        .map_err(|e| read_error(format!("not a valid OBJ file ({e})")))?;
+    })
+    .map_err(|message| read_error(format!("the OBJ decoder failed on it ({message})")))?;
+    let (models, materials) =
+        loaded.map_err(|e| read_error(format!("not a valid OBJ file ({e})")))?;
     let materials = match materials {
         Ok(m) => m,
         Err(e) if !options.allow_missing_materials => {

@@ -1,7 +1,7 @@
 //! `complete --preview`: input and completed cloud side by side from three viewpoints, the
 //! completed points tinted, as one PNG — what a person checks first.
 
-use crate::train::plot::text;
+use crate::core::glyphs::text;
 use image::{Rgb, RgbImage};
 
 /// Side of one rendered tile in pixels.

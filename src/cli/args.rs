@@ -115,7 +115,8 @@ pub enum Metric {
     Mae,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Normalize {
     /// Coordinates as stored.
     None,

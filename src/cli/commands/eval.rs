@@ -6,10 +6,10 @@ use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
 use mvpcc::datagen::scan::PartialSpec;
 use mvpcc::io::Format;
-use mvpcc::metrics::{compare_clouds, compare_images, CloudMetrics, ImageMetrics};
+use mvpcc::metrics::{compare_clouds, compare_images, CloudMetrics, FScore, ImageMetrics};
 use mvpcc::views::projection::CHANNELS;
 use mvpcc::views::{find_views, read_views};
-use serde_json::{json, Map, Value};
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -92,17 +92,160 @@ fn score(pair: &Pair, args: &EvalArgs, log: Log) -> anyhow::Result<CloudMetrics>
     Ok(compare_clouds(&pred.positions, &gt.positions, &args.tau))
 }
 
-fn cloud_json(m: &CloudMetrics, metrics: &[Metric]) -> Map<String, Value> {
-    let mut o = Map::new();
-    if metrics.contains(&Metric::Cd) {
-        o.insert("cd_l2_half".into(), json!(m.cd_l2_half));
-        o.insert("cd_l1".into(), json!(m.cd_l1));
-        o.insert("cd_l2".into(), json!(m.cd_l2));
+/// A cloud's scores as `--json` prints them: the metrics `--metrics` asked for.
+#[derive(Debug, Serialize)]
+struct Scores {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cd_l2_half: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cd_l1: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cd_l2: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fscore: Option<Vec<FScore>>,
+}
+
+impl Scores {
+    fn of(m: &CloudMetrics, metrics: &[Metric]) -> Scores {
+        let cd = metrics.contains(&Metric::Cd);
+        Scores {
+            cd_l2_half: cd.then_some(m.cd_l2_half),
+            cd_l1: cd.then_some(m.cd_l1),
+            cd_l2: cd.then_some(m.cd_l2),
+            fscore: metrics.contains(&Metric::F1).then(|| m.fscores.clone()),
+        }
     }
-    if metrics.contains(&Metric::F1) {
-        o.insert("fscore".into(), json!(m.fscores));
+}
+
+/// One pair of clouds of `--pred`/`--gt` or `--pred-dir`/`--gt-dir`.
+#[derive(Debug, Serialize)]
+struct PairReport {
+    name: String,
+    pred: PathBuf,
+    gt: PathBuf,
+    pred_points: usize,
+    gt_points: usize,
+    #[serde(flatten)]
+    scores: Scores,
+}
+
+/// View-image scores: the metrics `--metrics` asked for.
+#[derive(Debug, Serialize)]
+struct ImageScores {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    psnr_db: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ssim: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mae: Option<f64>,
+}
+
+impl ImageScores {
+    fn of(m: &ImageMetrics, metrics: &[Metric]) -> ImageScores {
+        ImageScores {
+            psnr_db: metrics.contains(&Metric::Psnr).then_some(m.psnr),
+            ssim: metrics.contains(&Metric::Ssim).then_some(m.ssim),
+            mae: metrics.contains(&Metric::Mae).then_some(m.mae),
+        }
     }
-    o
+}
+
+#[derive(Debug, Serialize)]
+struct ViewsReport {
+    #[serde(flatten)]
+    mean: ImageScores,
+    pred: PathBuf,
+    gt: PathBuf,
+    cameras: Vec<usize>,
+    per_view: Vec<ImageScores>,
+}
+
+/// What `eval --json` prints for clouds and views.
+#[derive(Debug, Serialize)]
+struct EvalReport {
+    normalization: Normalize,
+    thresholds: Vec<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pairs: Option<Vec<PairReport>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mean: Option<Scores>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    views: Option<ViewsReport>,
+}
+
+#[derive(Debug, Serialize)]
+struct GroupReport {
+    #[serde(flatten)]
+    scores: Scores,
+    samples: usize,
+}
+
+#[derive(Debug, Serialize)]
+struct SampleReport {
+    #[serde(flatten)]
+    scores: Scores,
+    name: String,
+    protocol: &'static str,
+}
+
+/// What `eval --data --json` prints.
+#[derive(Debug, Serialize)]
+struct DatasetReport {
+    data: PathBuf,
+    pred_dir: PathBuf,
+    ground_truth: GroundTruth,
+    thresholds: Vec<f64>,
+    groups: BTreeMap<String, GroupReport>,
+    samples: Vec<SampleReport>,
+}
+
+/// The text tables `eval` prints without `--json`: a left-aligned name column, the others
+/// right-aligned.
+#[derive(Default)]
+struct Table {
+    lines: Vec<String>,
+}
+
+impl Table {
+    fn row(&mut self, name: &str, cells: &[String]) {
+        let mut line = format!("{name:<24}");
+        for c in cells {
+            line += &format!(" {c:>12}");
+        }
+        self.lines.push(line);
+    }
+
+    fn blank(&mut self) {
+        if !self.lines.is_empty() {
+            self.lines.push(String::new());
+        }
+    }
+
+    fn cloud_header(&mut self, metrics: &[Metric], taus: &[f64]) {
+        let mut cells = vec!["pred_pts".to_string(), "gt_pts".to_string()];
+        if metrics.contains(&Metric::Cd) {
+            cells.extend(["cd_l2_half", "cd_l1", "cd_l2"].map(String::from));
+        }
+        if metrics.contains(&Metric::F1) {
+            for t in taus {
+                cells.extend([format!("f1@{t}"), format!("prec@{t}"), format!("rec@{t}")]);
+            }
+        }
+        self.row("name", &cells);
+    }
+
+    fn cloud_row(&mut self, name: &str, m: &CloudMetrics, metrics: &[Metric]) {
+        let mut cells = vec![m.pred_points.to_string(), m.gt_points.to_string()];
+        if metrics.contains(&Metric::Cd) {
+            cells.extend([m.cd_l2_half, m.cd_l1, m.cd_l2].map(|v| format!("{v:.6e}")));
+        }
+        if metrics.contains(&Metric::F1) {
+            for f in &m.fscores {
+                cells.extend([f.f1, f.precision, f.recall].map(|v| format!("{v:.6}")));
+            }
+        }
+        self.row(name, &cells);
+    }
 }
 
 fn mean_metrics(all: &[CloudMetrics]) -> CloudMetrics {
@@ -120,40 +263,6 @@ fn mean_metrics(all: &[CloudMetrics]) -> CloudMetrics {
     mean.pred_points = all.iter().map(|m| m.pred_points).sum::<usize>() / all.len();
     mean.gt_points = all.iter().map(|m| m.gt_points).sum::<usize>() / all.len();
     mean
-}
-
-fn table_header(metrics: &[Metric], taus: &[f64]) -> String {
-    let mut h = format!("{:<24} {:>9} {:>9}", "name", "pred_pts", "gt_pts");
-    if metrics.contains(&Metric::Cd) {
-        h += &format!(" {:>12} {:>12} {:>12}", "cd_l2_half", "cd_l1", "cd_l2");
-    }
-    if metrics.contains(&Metric::F1) {
-        for t in taus {
-            h += &format!(
-                " {:>10} {:>10} {:>10}",
-                format!("f1@{t}"),
-                format!("prec@{t}"),
-                format!("rec@{t}")
-            );
-        }
-    }
-    h
-}
-
-fn table_row(name: &str, m: &CloudMetrics, metrics: &[Metric]) -> String {
-    let mut r = format!("{:<24} {:>9} {:>9}", name, m.pred_points, m.gt_points);
-    if metrics.contains(&Metric::Cd) {
-        r += &format!(
-            " {:>12.6e} {:>12.6e} {:>12.6e}",
-            m.cd_l2_half, m.cd_l1, m.cd_l2
-        );
-    }
-    if metrics.contains(&Metric::F1) {
-        for f in &m.fscores {
-            r += &format!(" {:>10.6} {:>10.6} {:>10.6}", f.f1, f.precision, f.recall);
-        }
-    }
-    r
 }
 
 /// One test partial of a data directory and its completion.
@@ -264,41 +373,34 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
             groups.entry(key).or_default().push(m.clone());
         }
     }
-    let mut table = vec![table_header(&args.metrics, &args.tau)];
-    let mut out = Map::new();
-    out.insert("data".into(), json!(data.display().to_string()));
-    out.insert("pred_dir".into(), json!(pred_dir.display().to_string()));
-    out.insert("ground_truth".into(), json!(args.ground_truth));
-    out.insert("thresholds".into(), json!(args.tau));
-    let mut group_json = Map::new();
+    let mut table = Table::default();
+    table.cloud_header(&args.metrics, &args.tau);
+    let mut report = DatasetReport {
+        data: data.to_path_buf(),
+        pred_dir: pred_dir.to_path_buf(),
+        ground_truth: args.ground_truth,
+        thresholds: args.tau.clone(),
+        groups: BTreeMap::new(),
+        samples: samples
+            .iter()
+            .zip(&results)
+            .map(|(s, m)| SampleReport {
+                scores: Scores::of(m, &args.metrics),
+                name: s.name.clone(),
+                protocol: s.protocol,
+            })
+            .collect(),
+    };
     for (key, ms) in groups.iter().chain([(&"all".to_string(), &results)]) {
         let mean = mean_metrics(ms);
-        table.push(table_row(
-            &format!("{key} ({})", ms.len()),
-            &mean,
-            &args.metrics,
-        ));
-        let mut o = cloud_json(&mean, &args.metrics);
-        o.insert("samples".into(), json!(ms.len()));
-        group_json.insert(key.clone(), Value::Object(o));
+        table.cloud_row(&format!("{key} ({})", ms.len()), &mean, &args.metrics);
+        let group = GroupReport {
+            scores: Scores::of(&mean, &args.metrics),
+            samples: ms.len(),
+        };
+        report.groups.insert(key.clone(), group);
     }
-    out.insert("groups".into(), Value::Object(group_json));
-    out.insert(
-        "samples".into(),
-        Value::Array(
-            samples
-                .iter()
-                .zip(&results)
-                .map(|(s, m)| {
-                    let mut o = cloud_json(m, &args.metrics);
-                    o.insert("name".into(), json!(s.name));
-                    o.insert("protocol".into(), json!(s.protocol));
-                    Value::Object(o)
-                })
-                .collect(),
-        ),
-    );
-    print_results(args.json, out, &table)
+    print_results(args.json, &report, &table)
 }
 
 fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec<ImageMetrics>)> {
@@ -335,26 +437,22 @@ pub(super) fn run(args: EvalArgs, log: Log) -> anyhow::Result<()> {
         return eval_dataset(data, pred_dir, &args, log);
     }
     let (geometry, color) = check(&args)?;
-    let mut out = Map::new();
-    out.insert(
-        "normalization".into(),
-        json!(match args.normalize {
-            Normalize::None => "none",
-            Normalize::GtBox => "gt-box",
-        }),
-    );
-    out.insert("thresholds".into(), json!(args.tau));
-    let mut table = Vec::new();
+    let mut report = EvalReport {
+        normalization: args.normalize,
+        thresholds: args.tau.clone(),
+        pairs: None,
+        mean: None,
+        views: None,
+    };
+    let mut table = Table::default();
     if geometry {
-        eval_clouds(&args, log, &mut out, &mut table)?;
+        eval_clouds(&args, log, &mut report, &mut table)?;
     }
     if color {
-        if !table.is_empty() {
-            table.push(String::new());
-        }
-        eval_view_dirs(&args, &mut out, &mut table)?;
+        table.blank();
+        eval_view_dirs(&args, &mut report, &mut table)?;
     }
-    print_results(args.json, out, &table)
+    print_results(args.json, &report, &table)
 }
 
 /// Which kinds of metric the options ask for (geometry, colour), after checking that they
@@ -388,8 +486,8 @@ fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
 fn eval_clouds(
     args: &EvalArgs,
     log: Log,
-    out: &mut Map<String, Value>,
-    table: &mut Vec<String>,
+    report: &mut EvalReport,
+    table: &mut Table,
 ) -> anyhow::Result<()> {
     let pairs = match (&args.pred, &args.gt, &args.pred_dir, &args.gt_dir) {
         (Some(pred), Some(gt), _, _) => vec![Pair {
@@ -410,31 +508,28 @@ fn eval_clouds(
         bar.inc(1);
     }
     bar.finish_and_clear();
-    table.push(table_header(&args.metrics, &args.tau));
-    let mut rows = Vec::new();
+    table.cloud_header(&args.metrics, &args.tau);
     for (pair, m) in pairs.iter().zip(&results) {
-        table.push(table_row(&pair.name, m, &args.metrics));
-        let mut o = Map::new();
-        o.insert("name".into(), json!(pair.name));
-        o.insert("pred".into(), json!(pair.pred.display().to_string()));
-        o.insert("gt".into(), json!(pair.gt.display().to_string()));
-        o.insert("pred_points".into(), json!(m.pred_points));
-        o.insert("gt_points".into(), json!(m.gt_points));
-        o.extend(cloud_json(m, &args.metrics));
-        rows.push(Value::Object(o));
+        table.cloud_row(&pair.name, m, &args.metrics);
     }
-    out.insert("pairs".into(), Value::Array(rows));
+    report.pairs = Some(
+        pairs
+            .into_iter()
+            .zip(&results)
+            .map(|(pair, m)| PairReport {
+                name: pair.name,
+                pred: pair.pred,
+                gt: pair.gt,
+                pred_points: m.pred_points,
+                gt_points: m.gt_points,
+                scores: Scores::of(m, &args.metrics),
+            })
+            .collect(),
+    );
     if results.len() > 1 {
         let mean = mean_metrics(&results);
-        table.push(table_row(
-            &format!("mean of {}", results.len()),
-            &mean,
-            &args.metrics,
-        ));
-        out.insert(
-            "mean".into(),
-            Value::Object(cloud_json(&mean, &args.metrics)),
-        );
+        table.cloud_row(&format!("mean of {}", results.len()), &mean, &args.metrics);
+        report.mean = Some(Scores::of(&mean, &args.metrics));
     }
     Ok(())
 }
@@ -442,8 +537,8 @@ fn eval_clouds(
 /// PSNR, SSIM and MAE of `--pred-views` against `--gt-views`, per view and averaged.
 fn eval_view_dirs(
     args: &EvalArgs,
-    out: &mut Map<String, Value>,
-    table: &mut Vec<String>,
+    report: &mut EvalReport,
+    table: &mut Table,
 ) -> anyhow::Result<()> {
     let (Some(pred_dir), Some(gt_dir)) = (&args.pred_views, &args.gt_views) else {
         unreachable!("checked: clap requires both");
@@ -455,55 +550,37 @@ fn eval_view_dirs(
         ssim: per_view.iter().map(|m| m.ssim).sum::<f64>() / n,
         mae: per_view.iter().map(|m| m.mae).sum::<f64>() / n,
     };
-    let pick = |m: &ImageMetrics| {
-        let mut o = Map::new();
-        if args.metrics.contains(&Metric::Psnr) {
-            o.insert("psnr_db".into(), json!(m.psnr));
-        }
-        if args.metrics.contains(&Metric::Ssim) {
-            o.insert("ssim".into(), json!(m.ssim));
-        }
-        if args.metrics.contains(&Metric::Mae) {
-            o.insert("mae".into(), json!(m.mae));
-        }
-        o
-    };
-    let mut views = pick(&mean);
-    views.insert("pred".into(), json!(pred_dir.display().to_string()));
-    views.insert("gt".into(), json!(gt_dir.display().to_string()));
-    views.insert("cameras".into(), json!(cameras));
-    views.insert(
-        "per_view".into(),
-        Value::Array(per_view.iter().map(|m| Value::Object(pick(m))).collect()),
-    );
-    out.insert("views".into(), Value::Object(views));
-    table.push(format!(
-        "{:<8} {:>10} {:>10} {:>10}",
-        "view", "psnr_db", "ssim", "mae"
-    ));
-    let row = |name: String, m: &ImageMetrics| {
-        format!(
-            "{name:<8} {:>10.4} {:>10.6} {:>10.6}",
-            m.psnr, m.ssim, m.mae
-        )
+    table.row("view", &["psnr_db", "ssim", "mae"].map(String::from));
+    let cells = |m: &ImageMetrics| {
+        [
+            format!("{:.4}", m.psnr),
+            format!("{:.6}", m.ssim),
+            format!("{:.6}", m.mae),
+        ]
     };
     for (c, m) in cameras.iter().zip(&per_view) {
-        table.push(row(format!("{c:03}"), m));
+        table.row(&format!("{c:03}"), &cells(m));
     }
-    table.push(row("mean".into(), &mean));
+    table.row("mean", &cells(&mean));
+    report.views = Some(ViewsReport {
+        mean: ImageScores::of(&mean, &args.metrics),
+        pred: pred_dir.clone(),
+        gt: gt_dir.clone(),
+        cameras,
+        per_view: per_view
+            .iter()
+            .map(|m| ImageScores::of(m, &args.metrics))
+            .collect(),
+    });
     Ok(())
 }
 
-/// The results on stdout: the JSON object with `--json`, the table otherwise.
-fn print_results(
-    json: bool,
-    out: serde_json::Map<String, Value>,
-    table: &[String],
-) -> anyhow::Result<()> {
+/// The results on stdout: the report as JSON with `--json`, the table otherwise.
+fn print_results(json: bool, report: &impl Serialize, table: &Table) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(&Value::Object(out))?);
+        println!("{}", serde_json::to_string_pretty(report)?);
     } else {
-        for line in table {
+        for line in &table.lines {
             println!("{line}");
         }
     }

@@ -24,40 +24,67 @@ fn las_problem(e: las::Error) -> Problem {
     }
 }
 
-/// Refuses a LAZ file whose chunk table claims more chunks than the file has bytes: the laz
-/// crate sizes a table for the claimed count (up to 2³² entries, 64 GiB) before decoding it.
-/// Anything else odd is left for the las crate to report.
-fn check_chunk_table(path: &Path) -> Result<(), Problem> {
-    use std::io::{Read, Seek, SeekFrom};
+/// Checks what a LAS/LAZ header claims against the file before the las and laz crates act on
+/// it: they allocate claimed sizes up front and panic on some inconsistencies. One read of the
+/// header (at most 375 bytes) serves every check; anything else odd is left for the las crate
+/// to report.
+fn check_claims(path: &Path) -> Result<(), Problem> {
+    use std::io::Read;
     let mut file = std::fs::File::open(path)?;
     let size = file.metadata()?.len();
-    let mut header = [0u8; 105];
-    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" {
+    let mut header = Vec::with_capacity(375);
+    (&mut file).take(375).read_to_end(&mut header)?;
+    if !header.starts_with(b"LASF") || header.len() < 107 {
         return Ok(());
     }
     // LASzip marks compressed point formats with the top bit.
-    if header[104] & 0x80 == 0 {
-        return Ok(());
+    if header[104] & 0x80 != 0 {
+        check_laszip_items(&mut file, &header)?;
+        check_chunk_table(&mut file, &header, size)?;
     }
-    let data_start = u64::from(u32::from_le_bytes([
-        header[96], header[97], header[98], header[99],
-    ]));
+    if header[25] >= 4 && header.len() >= 247 {
+        check_evlrs(&mut file, &header, size)?;
+    }
+    Ok(())
+}
+
+/// Reads `bytes.len()` bytes at `at`; false where the file ends first.
+fn read_at(file: &mut std::fs::File, at: std::io::SeekFrom, bytes: &mut [u8]) -> bool {
+    use std::io::{Read, Seek};
+    file.seek(at).and_then(|_| file.read_exact(bytes)).is_ok()
+}
+
+fn u16_at(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().expect("eight bytes"))
+}
+
+/// A LAZ chunk table must not claim more chunks than the file has bytes: the laz crate sizes a
+/// table for the claimed count (up to 2³² entries, 64 GiB) before decoding it.
+fn check_chunk_table(file: &mut std::fs::File, header: &[u8], size: u64) -> Result<(), Problem> {
+    use std::io::SeekFrom;
+    let data_start = u64::from(u32_at(header, 96));
     let mut word = [0u8; 8];
-    let mut read_at =
-        |at: SeekFrom, bytes: &mut [u8]| file.seek(at).and_then(|_| file.read_exact(bytes)).is_ok();
-    if !read_at(SeekFrom::Start(data_start), &mut word) {
+    if !read_at(file, SeekFrom::Start(data_start), &mut word) {
         return Ok(());
     }
     // A writer that could not seek back leaves the table's offset at the end of the file.
     let mut table = i64::from_le_bytes(word);
     if table <= data_start as i64 {
-        if !read_at(SeekFrom::End(-8), &mut word) {
+        if !read_at(file, SeekFrom::End(-8), &mut word) {
             return Ok(());
         }
         table = i64::from_le_bytes(word);
     }
     let mut count = [0u8; 4];
-    if table <= data_start as i64 || !read_at(SeekFrom::Start(table as u64 + 4), &mut count) {
+    if table <= data_start as i64 || !read_at(file, SeekFrom::Start(table as u64 + 4), &mut count) {
         return Ok(());
     }
     let chunks = u32::from_le_bytes(count);
@@ -69,24 +96,14 @@ fn check_chunk_table(path: &Path) -> Result<(), Problem> {
     Ok(())
 }
 
-/// Refuses a LAS 1.4 file whose extended VLRs claim more bytes than the file holds: the las
-/// crate allocates an EVLR's claimed length (a u64) before reading it.
-fn check_evlrs(path: &Path) -> Result<(), Problem> {
-    use std::io::{Read, Seek, SeekFrom};
+/// LAS 1.4 extended VLRs must not claim more bytes than the file holds: the las crate
+/// allocates an EVLR's claimed length (a u64) before reading it.
+fn check_evlrs(file: &mut std::fs::File, header: &[u8], size: u64) -> Result<(), Problem> {
     const EVLR_HEADER: u64 = 60;
-    let mut file = std::fs::File::open(path)?;
-    let size = file.metadata()?.len();
-    let mut header = [0u8; 247];
-    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" || header[25] < 4 {
-        return Ok(());
-    }
-    let u64_at =
-        |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().expect("eight bytes"));
-    let mut at = u64_at(&header, 235);
-    let count = u32::from_le_bytes([header[243], header[244], header[245], header[246]]);
+    let mut at = u64_at(header, 235);
     let mut evlr = [0u8; EVLR_HEADER as usize];
-    for k in 0..count {
-        if file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut evlr).is_err() {
+    for k in 0..u32_at(header, 243) {
+        if !read_at(file, std::io::SeekFrom::Start(at), &mut evlr) {
             return Ok(());
         }
         let length = u64_at(&evlr, 20);
@@ -102,28 +119,20 @@ fn check_evlrs(path: &Path) -> Result<(), Problem> {
     Ok(())
 }
 
-/// Refuses a LAZ file whose LASzip description lists no point items, or items that do not add
-/// up to the header's point record: the laz crate panics on both. Only the header and the VLRs
-/// are read.
-fn check_laszip_items(path: &Path) -> Result<(), Problem> {
-    use std::io::{Read, Seek, SeekFrom};
+/// A LASzip description must list point items that add up to the header's point record: the
+/// laz crate panics otherwise. Only the VLRs are read.
+fn check_laszip_items(file: &mut std::fs::File, header: &[u8]) -> Result<(), Problem> {
+    use std::io::Read;
     const VLR_HEADER: usize = 54;
-    let mut file = std::fs::File::open(path)?;
-    let mut header = [0u8; 107];
-    if file.read_exact(&mut header).is_err() || &header[..4] != b"LASF" || header[104] & 0x80 == 0 {
-        return Ok(());
-    }
-    let record = u16::from_le_bytes([header[105], header[106]]);
-    let mut at = u64::from(u16::from_le_bytes([header[94], header[95]]));
-    let count = u32::from_le_bytes([header[100], header[101], header[102], header[103]]);
+    let record = u16_at(header, 105);
+    let mut at = u64::from(u16_at(header, 94));
     let mut vlr = [0u8; VLR_HEADER];
-    for _ in 0..count {
-        if file.seek(SeekFrom::Start(at)).is_err() || file.read_exact(&mut vlr).is_err() {
+    for _ in 0..u32_at(header, 100) {
+        if !read_at(file, std::io::SeekFrom::Start(at), &mut vlr) {
             return Ok(());
         }
-        let record_id = u16::from_le_bytes([vlr[18], vlr[19]]);
-        let length = u16::from_le_bytes([vlr[20], vlr[21]]);
-        if vlr[2..16].starts_with(b"laszip encoded") && record_id == 22204 {
+        let length = u16_at(&vlr, 20);
+        if vlr[2..16].starts_with(b"laszip encoded") && u16_at(&vlr, 18) == 22204 {
             let mut data = vec![0u8; usize::from(length)];
             if file.read_exact(&mut data).is_err() {
                 return Ok(());
@@ -139,10 +148,7 @@ fn check_laszip_items(path: &Path) -> Result<(), Problem> {
 /// length.
 fn check_items(data: &[u8], record: u16) -> Result<(), Problem> {
     // The item count follows 32 bytes of versions, options and sizes; each item is 6 bytes.
-    let Some(count) = data
-        .get(32..34)
-        .map(|b| usize::from(u16::from_le_bytes([b[0], b[1]])))
-    else {
+    let Some(count) = data.get(32..34).map(|b| usize::from(u16_at(b, 0))) else {
         return Ok(());
     };
     if count == 0 {
@@ -152,7 +158,7 @@ fn check_items(data: &[u8], record: u16) -> Result<(), Problem> {
     }
     let sizes: Option<u32> = (0..count)
         .map(|i| data.get(34 + 6 * i + 2..34 + 6 * i + 4))
-        .map(|b| b.map(|b| u32::from(u16::from_le_bytes([b[0], b[1]]))))
+        .map(|b| b.map(|b| u32::from(u16_at(b, 0))))
         .sum();
     match sizes {
         Some(total) if total != u32::from(record) => Err(Problem::Malformed(format!(
@@ -163,9 +169,7 @@ fn check_items(data: &[u8], record: u16) -> Result<(), Problem> {
 }
 
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
-    check_laszip_items(path)?;
-    check_chunk_table(path)?;
-    check_evlrs(path)?;
+    check_claims(path)?;
     // On a thread of its own with a deep stack: the laz crate's GPS-time decoder recurses once
     // per "switch sequence" symbol, and a damaged file of 1,248 bytes (a fuzz finding) asks for
     // about 300 MiB of stack before its data runs out. Stack pages cost memory only when

@@ -1,7 +1,6 @@
-use burn::tensor::Device;
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::complete::clean::clean;
-use mvpcc::complete::orient::{orient, OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::complete::orient::{orient, OrientMode, Orienter};
 use mvpcc::core::frame::UpAxis;
 use std::time::Duration;
 
@@ -9,7 +8,7 @@ mod common;
 
 fn orientation(c: &mut Criterion) {
     let (car, name) = common::mls_car();
-    let orienter = Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex()).unwrap();
+    let orienter = Orienter::builtin().unwrap();
     let mut group = c.benchmark_group(format!("orientation, {} points ({name})", car.len()));
     group
         .sample_size(20)

@@ -17,6 +17,17 @@ fn mvpcc() -> Command {
     Command::cargo_bin("mvpcc").unwrap()
 }
 
+/// `mvpcc complete` over the folder `inputs` into `outputs`.
+fn complete_dir(inputs: &Path, outputs: &Path) -> Command {
+    let mut cmd = mvpcc();
+    cmd.arg("complete")
+        .arg("--input-dir")
+        .arg(inputs)
+        .arg("--output-dir")
+        .arg(outputs);
+    cmd
+}
+
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
@@ -241,14 +252,7 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
     #[cfg(unix)]
     std::os::unix::fs::symlink(&inputs, inputs.join("street/loop")).unwrap();
     let outputs = dir.path().join("out");
-    let assert = mvpcc()
-        .args([
-            "complete",
-            "--input-dir",
-            s(&inputs),
-            "--output-dir",
-            s(&outputs),
-        ])
+    let assert = complete_dir(&inputs, &outputs)
         .args(["--model", s(&model), "--jobs", "2", "--json"])
         .assert()
         .failure()
@@ -375,14 +379,7 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
     assert_eq!(completed.len(), 2);
     assert!(listed.join("block/d.ply").is_file() && listed.join("c.ply").is_file());
 
-    mvpcc()
-        .args([
-            "complete",
-            "--input-dir",
-            s(&inputs),
-            "--output-dir",
-            s(&outputs),
-        ])
+    complete_dir(&inputs, &outputs)
         .args(["--shard", "3/3"])
         .assert()
         .failure()
@@ -452,16 +449,8 @@ fn the_paper_pipeline_runs_on_the_reference_scans() {
     }
     let dir = TempDir::new().unwrap();
     let out = dir.path().join("out");
-    let assert = mvpcc()
-        .args([
-            "complete",
-            "--paper",
-            "--input-dir",
-            s(&mls),
-            "--output-dir",
-            s(&out),
-        ])
-        .args(["--up", "z", "--json"])
+    let assert = complete_dir(&mls, &out)
+        .args(["--paper", "--up", "z", "--json"])
         .assert()
         .success();
     let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();

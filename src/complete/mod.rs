@@ -16,7 +16,7 @@ pub mod symmetry;
 
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::{inliers, SorParams};
-use crate::complete::orient::{orient, OrientMode, Orientation, Orienter, DEFAULT_ORIENTER};
+use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
 use crate::complete::symmetry::{find_plane, mirror, Plane};
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
@@ -244,12 +244,11 @@ impl Completer {
         }
     }
 
-    /// The built-in generator on `device` and the built-in orientation network (on the CPU,
-    /// where a network that small runs fastest).
+    /// The built-in generator on `device` and the built-in orientation network.
     pub fn builtin(device: Device) -> Result<Completer, WeightsError> {
         Ok(Completer::new(
             Some(Inpainter::from_bytes(DEFAULT_MODEL, device)?),
-            Some(Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())?),
+            Some(Orienter::builtin()?),
         ))
     }
 

@@ -4,7 +4,7 @@ use crate::cli::args::CompleteArgs;
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
 use mvpcc::complete::clean::CleanReport;
-use mvpcc::complete::orient::{OrientMode, Orienter, DEFAULT_ORIENTER};
+use mvpcc::complete::orient::{OrientMode, Orienter};
 use mvpcc::complete::preview::{render, Layer};
 use mvpcc::complete::{
     Completer, Completion, Method, Options, Run, Settings, Timings, DEFAULT_MODEL, SYNTHETIC,
@@ -78,8 +78,7 @@ fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
             Orienter::from_bytes(&bytes, Device::flex())
                 .with_context(|| format!("{}", path.display()))
         }
-        None => Orienter::from_bytes(DEFAULT_ORIENTER, Device::flex())
-            .context("the built-in orientation network"),
+        None => Orienter::builtin().context("the built-in orientation network"),
     }
 }
 

@@ -143,6 +143,11 @@ impl Orienter {
         }
     }
 
+    /// The built-in orientation network, on the CPU: a network this small runs fastest there.
+    pub fn builtin() -> Result<Orienter, WeightsError> {
+        Orienter::from_bytes(super::DEFAULT_ORIENTER, Device::flex())
+    }
+
     pub fn from_bytes(bytes: &[u8], device: Device) -> Result<Orienter, WeightsError> {
         let config: OrienterConfig = read_declared(bytes, Network::Orienter)?;
         config.validate().map_err(WeightsError::Config)?;

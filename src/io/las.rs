@@ -9,6 +9,8 @@ use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Writer};
 use std::io::{BufReader, BufWriter};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// Bytes of point records read at a time: a header may declare records of up to 64 KiB, so the
 /// batch is sized in bytes, not points.
@@ -172,14 +174,19 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     check_claims(path)?;
     // On a thread of its own with a deep stack: the laz crate's GPS-time decoder recurses once
     // per "switch sequence" symbol, and a damaged file of 1,248 bytes (a fuzz finding) asks for
-    // about 300 MiB of stack before its data runs out. Stack pages cost memory only when
-    // touched; where the address space is limited, smaller stacks are tried.
+    // about 300 MiB of stack in a release build, several GiB in a debug one, before its data
+    // runs out. Stack pages cost memory only when touched; where the address space is limited,
+    // smaller stacks are tried. [`StackGuard`] ends such a descent with an error before the
+    // stack does.
     let decoded = DECODER_STACKS.iter().find_map(|&stack| {
         std::thread::scope(|scope| {
             std::thread::Builder::new()
                 .name("las".into())
                 .stack_size(stack)
-                .spawn_scoped(scope, || guarded(|| read_checked(path)))
+                .spawn_scoped(scope, || {
+                    let floor = stack_floor(stack);
+                    guarded(|| read_checked(path, floor))
+                })
                 .ok()
                 .map(|thread| {
                     thread
@@ -199,12 +206,69 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     }
 }
 
+/// A reader that refuses to be read from below a stack address. The LAZ decoder reads its
+/// input a byte at a time from inside its recursion, so a descent that has used up half of
+/// the thread's stack meets an I/O error, which unwinds it through the decoder's own `?`s;
+/// between two reads it recurses at most about 50,000 times (the adaptive model's largest
+/// probability leaves each symbol at least 1.5e-4 bits), far less than the half kept free.
+/// It raises `tripped` too, since the laz crate's errors keep the I/O error's text but not
+/// the error itself.
+#[derive(Debug)]
+struct StackGuard<R> {
+    inner: R,
+    floor: usize,
+    tripped: Arc<AtomicBool>,
+}
+
+/// The lowest address a [`StackGuard`] lets reads come from on the current thread, whose
+/// stack is `stack` bytes: half of it below the caller's frame. Stacks grow downwards on every
+/// platform this builds for.
+fn stack_floor(stack: usize) -> usize {
+    stack_address().saturating_sub(stack / 2)
+}
+
+fn stack_address() -> usize {
+    let marker = 0u8;
+    std::hint::black_box(&marker) as *const u8 as usize
+}
+
+impl<R: std::io::Read> std::io::Read for StackGuard<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if stack_address() < self.floor {
+            self.tripped.store(true, Ordering::Relaxed);
+            return Err(std::io::ErrorKind::InvalidData.into());
+        }
+        self.inner.read(buf)
+    }
+}
+
+impl<R: std::io::Seek> std::io::Seek for StackGuard<R> {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.inner.seek(pos)
+    }
+}
+
 /// Stack sizes tried, in order, for the thread LAS/LAZ files are decoded on.
 const DECODER_STACKS: [usize; 3] = [1 << 30, 256 << 20, 16 << 20];
 
-fn read_checked(path: &Path) -> Result<PointCloud, Problem> {
+fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> {
     let file = std::fs::File::open(path)?;
-    let mut reader = las::Reader::new(BufReader::new(file)).map_err(las_problem)?;
+    let tripped = Arc::new(AtomicBool::new(false));
+    let guarded = StackGuard {
+        inner: BufReader::new(file),
+        floor: stack_floor,
+        tripped: tripped.clone(),
+    };
+    let problem = |e| {
+        if tripped.load(Ordering::Relaxed) {
+            Problem::Malformed(
+                "its compressed points nest deeper than any valid LAZ file (damaged data)".into(),
+            )
+        } else {
+            las_problem(e)
+        }
+    };
+    let mut reader = las::Reader::new(guarded).map_err(problem)?;
     let header = reader.header().clone();
     let declared = header.number_of_points() as usize;
     check_points(declared)?;
@@ -223,12 +287,12 @@ fn read_checked(path: &Path) -> Result<PointCloud, Problem> {
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
-        let data = reader.read_points(batch).map_err(las_problem)?;
+        let data = reader.read_points(batch).map_err(problem)?;
         if data.is_empty() {
             break;
         }
         for p in data.points() {
-            let p = p.map_err(las_problem)?;
+            let p = p.map_err(problem)?;
             positions.push([p.x, p.y, p.z]);
             if let Some(c) = p.color {
                 colors16.push([c.red, c.green, c.blue]);
@@ -299,7 +363,7 @@ fn quantization_for(cloud: &PointCloud) -> Quantization {
     let b = cloud
         .bounds()
         .expect("writers are not called with empty clouds");
-    let extent = b.extent().iter().cloned().fold(f64::MIN_POSITIVE, f64::max);
+    let extent = b.longest_side().max(f64::MIN_POSITIVE);
     let scale = 10f64.powf((extent * 1e-7).log10().floor());
     Quantization {
         scale: [scale; 3],

@@ -4,6 +4,7 @@
 //! PoinTr's un-halved `cd_l2`; precision, recall and F1 at thresholds τ with a strict `<`. Colour on view
 //! images: PSNR, SSIM and MAE.
 
+use crate::core::cloud::Aabb;
 use crate::core::knn::knn_distances;
 use serde::Serialize;
 
@@ -132,15 +133,14 @@ struct FpsGrid {
 
 impl FpsGrid {
     fn new(points: &[[f64; 3]]) -> FpsGrid {
-        let (lo, hi) = points.iter().fold(
-            ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
-            |(lo, hi), p| {
-                (
-                    [0, 1, 2].map(|k| lo[k].min(p[k])),
-                    [0, 1, 2].map(|k| hi[k].max(p[k])),
-                )
-            },
-        );
+        let Some(Aabb { min: lo, max: hi }) = Aabb::of(points) else {
+            return FpsGrid {
+                cells: Vec::new(),
+                order: Vec::new(),
+                sorted: Vec::new(),
+                nearest: Vec::new(),
+            };
+        };
         // About 32 points per cell.
         let side = ((points.len() / 32).max(1) as f64).cbrt().ceil() as usize;
         let cell_of = |p: &[f64; 3]| {
@@ -166,12 +166,14 @@ impl FpsGrid {
                     .iter()
                     .take_while(|&&i| cell_of(&points[i]) == cell)
                     .count();
-            let (mut a, mut b) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-            for &i in &order[start..end] {
-                a = [0, 1, 2].map(|k| a[k].min(points[i][k]));
-                b = [0, 1, 2].map(|k| b[k].max(points[i][k]));
-            }
-            cells.push((a, b, start..end, (f64::INFINITY, order[start])));
+            let cell_box = Aabb::of_iter(order[start..end].iter().map(|&i| points[i]))
+                .expect("a cell holds at least its first point");
+            cells.push((
+                cell_box.min,
+                cell_box.max,
+                start..end,
+                (f64::INFINITY, order[start]),
+            ));
             start = end;
         }
         let sorted = order.iter().map(|&i| points[i]).collect();

@@ -88,14 +88,14 @@ fn eval_reproduces_the_reference_fixture() {
 }
 
 #[test]
-fn eval_over_directories_matches_by_stem() {
+fn eval_over_directories_matches_by_path_without_extension() {
     let dir = TempDir::new().unwrap();
     let (pred, gt) = (dir.path().join("pred"), dir.path().join("gt"));
-    std::fs::create_dir_all(&pred).unwrap();
-    std::fs::create_dir_all(&gt).unwrap();
+    std::fs::create_dir_all(pred.join("sub")).unwrap();
+    std::fs::create_dir_all(gt.join("sub")).unwrap();
     let full = shapes::car(4000, 1);
     let partial = shapes::scanned_side(&full);
-    for name in ["a", "b"] {
+    for name in ["a", "sub/b"] {
         write_cloud(
             &gt.join(format!("{name}.ply")),
             &full.cloud,

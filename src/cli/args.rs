@@ -4,6 +4,7 @@
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
+use mvpcc::complete::orient::OrienterConfig;
 use mvpcc::complete::{Method, Options};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
@@ -16,6 +17,8 @@ use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
 use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
+use mvpcc::train::orient::OrientSettings;
+use mvpcc::train::TrainSettings;
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
@@ -135,8 +138,9 @@ pub struct EvalArgs {
     /// Ground-truth cloud.
     #[arg(long, requires = "pred")]
     pub gt: Option<PathBuf>,
-    /// Directory of predicted clouds, matched to --gt-dir by file stem, or to --data's test
-    /// samples as CATEGORY/MODEL/partial_K.*.
+    /// Directory of predicted clouds, matched to --gt-dir's by path without the extension
+    /// (subfolders included, hidden files skipped), or to --data's test samples as
+    /// CATEGORY/MODEL/partial_K.*.
     #[arg(long, conflicts_with = "pred_views")]
     pub pred_dir: Option<PathBuf>,
     /// A data directory from `mvpcc prepare`: score --pred-dir's completions of its test
@@ -555,8 +559,7 @@ pub struct TrainArgs {
     /// samples/ [default: runs/DATA, DATA the data directory's name].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Rig cameras the model sees [default: 5,6,7,8].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Rig cameras the model sees", ViewList(train().views)))]
     pub views: Option<ViewList>,
     /// Image channels the model reads and writes [default: xyzrgb].
     #[arg(long, value_enum)]
@@ -583,11 +586,9 @@ pub struct TrainArgs {
     pub init_discriminator: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
-    /// Objects per micro-batch [default: 4].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Objects per micro-batch", train().batch))]
     pub batch: Option<usize>,
-    /// Micro-batches accumulated into one optimizer step [default: 1].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Micro-batches accumulated into one optimizer step", train().accumulate))]
     pub accumulate: Option<usize>,
     /// Stop after this many steps in all (a resumed run counts its earlier steps).
     #[arg(long)]
@@ -595,76 +596,92 @@ pub struct TrainArgs {
     /// Continue the run in --out from its latest checkpoint.
     #[arg(long)]
     pub resume: bool,
-    /// Generator learning rate of the first stage; the second and third use 1/10 and 1/100 of
-    /// it [default: 1e-4].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Generator learning rate of the first stage; the second and third use 1/10 and 1/100 of it",
+        train().stage_rates[0],
+    ))]
     pub lr: Option<f64>,
-    /// Most steps per stage [default: 100000].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Most steps per stage", train().stage_steps))]
     pub stage_steps: Option<u64>,
-    /// Validations without a better CD after which a stage ends [default: 5].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Validations without a better CD after which a stage ends",
+        train().patience,
+    ))]
     pub patience: Option<usize>,
-    /// Steps between validations; 0 = never [default: 500].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Steps between validations; 0 = never", train().val_every))]
     pub val_every: Option<u64>,
-    /// Validation samples (spread over the validation models) [default: 16].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Validation samples (spread over the validation models)",
+        train().val_samples,
+    ))]
     pub val_samples: Option<usize>,
-    /// Share of training models held back for validation when the data has no test split
-    /// [default: 0.05].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Share of training models held back for validation when the data has no test split",
+        train().val_fraction,
+    ))]
     pub val_fraction: Option<f64>,
-    /// Steps between checkpoints [default: 500].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Steps between checkpoints", train().checkpoint_every))]
     pub checkpoint_every: Option<u64>,
-    /// Checkpoints kept besides best/ [default: 3].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Checkpoints kept besides best/", train().keep))]
     pub keep: Option<usize>,
-    /// Steps between lines of log.jsonl [default: 10].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Steps between lines of log.jsonl", train().log_every))]
     pub log_every: Option<u64>,
-    /// Seed of initialization, sample order and augmentation [default: 0].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Seed of initialization, sample order and augmentation",
+        train().seed,
+    ))]
     pub seed: Option<u64>,
     /// Do not mirror samples x ↔ −x.
     #[arg(long)]
     pub no_mirror: bool,
-    /// Largest random yaw of a sample, degrees; 0 = off [default: 5].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Largest random yaw of a sample, degrees; 0 = off",
+        train().augment.max_yaw_deg,
+    ))]
     pub max_yaw: Option<f32>,
-    /// Largest relative colour gain change; 0 = off [default: 0.1].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Largest relative colour gain change; 0 = off",
+        train().augment.color_jitter,
+    ))]
     pub color_jitter: Option<f32>,
     /// torchvision's VGG19 weights (vgg19-dcbd0d2f.pth, or safetensors with its keys): the
     /// perceptual and style terms then use VGG19 features as the paper does, instead of the
     /// discriminator's.
     #[arg(long)]
     pub vgg19: Option<PathBuf>,
-    /// Weight of the smooth L1 term [default: 50, the original code's; so are the others].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Weight of the smooth L1 term (the defaults of all six are the original code's)",
+        train().loss.l1,
+    ))]
     pub loss_l1: Option<f64>,
-    /// Weight of the adversarial term [default: 0.1].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Weight of the adversarial term", train().loss.adversarial))]
     pub loss_adversarial: Option<f64>,
-    /// Weight of the perceptual term [default: 0.1; the paper's text: 250].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Weight of the perceptual term (the paper's text: 250)",
+        train().loss.perceptual,
+    ))]
     pub loss_perceptual: Option<f64>,
-    /// Weight of the style term [default: 250; the paper's text: 0.1].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Weight of the style term (the paper's text: 0.1)",
+        train().loss.style,
+    ))]
     pub loss_style: Option<f64>,
-    /// Weight of the occupancy BCE term [default: 0.1].
-    #[arg(long)]
+    #[arg(long, help = defaulted("Weight of the occupancy BCE term", train().loss.occupancy))]
     pub loss_bce: Option<f64>,
-    /// Weight of the total-variation term, further divided by the image side [default: 0.1].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "Weight of the total-variation term, further divided by the image side",
+        train().loss.tv,
+    ))]
     pub loss_tv: Option<f64>,
-    /// Adversarial loss [default: hinge].
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, help = defaulted(
+        "Adversarial loss",
+        train().loss.adversarial_kind.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),
+    ))]
     pub adversarial: Option<Adversarial>,
-    /// First learning-rate stage (1-based) with the total-variation term [default: 2, as the
-    /// original].
-    #[arg(long)]
+    #[arg(long, help = defaulted(
+        "First learning-rate stage (1-based) with the total-variation term, the original's by default",
+        train().tv_from_stage,
+    ))]
     pub tv_from_stage: Option<usize>,
     /// Threads that load and render samples while the network trains.
     #[arg(long, default_value_t = 1)]
@@ -690,25 +707,36 @@ pub struct TrainOrientArgs {
     /// runs/orient-DATA, DATA the data directory's name].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    #[arg(long, default_value_t = 4000)]
+    #[arg(long, default_value_t = OrientSettings::default().steps)]
     pub steps: u64,
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = OrientSettings::default().batch)]
     pub batch: usize,
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = OrientSettings::default().learning_rate)]
     pub lr: f64,
     /// Points the network reads from a cloud.
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = OrienterConfig::new().points)]
     pub points: usize,
     /// Steps between validations.
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = OrientSettings::default().val_every)]
     pub val_every: u64,
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = OrientSettings::default().val_samples)]
     pub val_samples: usize,
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = OrientSettings::default().seed)]
     pub seed: u64,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
     #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
     pub cache_mb: usize,
+}
+
+/// The training defaults, written once in the library.
+fn train() -> TrainSettings {
+    TrainSettings::default()
+}
+
+/// `text` followed by its default as clap shows defaults: for options kept as `Option`s, so a
+/// resumed run can tell the options given from the ones left out.
+fn defaulted(text: &str, value: impl std::fmt::Display) -> String {
+    format!("{text} [default: {value}]")
 }

@@ -73,7 +73,7 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
 
     let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
     let subset: Vec<[f64; 3]> = remaining.iter().map(|&i| points[i]).collect();
-    let extent = Aabb::of(&subset).map_or(0.0, |b| b.extent().into_iter().fold(0.0, f64::max));
+    let extent = Aabb::of(&subset).map_or(0.0, |b| b.longest_side());
     if let Some(ground) = ground_points(&subset, extent) {
         for (&i, g) in remaining.iter().zip(&ground) {
             if *g {

@@ -19,7 +19,7 @@ use crate::complete::filter::{inliers, SorParams};
 use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
 use crate::complete::symmetry::{find_plane, mirror, Plane};
 use crate::core::camera::{Camera, CameraError};
-use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
+use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
 use crate::core::knn::KnnIndex;
 use crate::model::inpaint::{InpaintError, Inpainter};
@@ -581,21 +581,13 @@ struct Added {
 /// plane and hold the whole object, so the box is fitted to the measured points together with
 /// their mirror images. Without a plane, the measured points' own box.
 fn symmetric_frame(fitted: &Frame, points: &[[f64; 3]], plane: Option<Plane>) -> Frame {
-    let Some(plane) = plane else {
+    let both = plane
+        .and_then(|plane| Aabb::of_iter(points.iter().flat_map(|&p| [p, mirror(p, plane.offset)])));
+    let Some(both) = both else {
         return fitted.clone();
     };
-    let mut lo = [f64::MAX; 3];
-    let mut hi = [f64::MIN; 3];
-    for &p in points {
-        for q in [p, mirror(p, plane.offset)] {
-            for i in 0..3 {
-                lo[i] = lo[i].min(q[i]);
-                hi[i] = hi[i].max(q[i]);
-            }
-        }
-    }
-    let center = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
-    let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+    let center = both.center();
+    let extent = both.longest_side();
     Frame {
         center: fitted.to_input(center),
         extent: fitted.extent * extent,

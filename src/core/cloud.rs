@@ -71,17 +71,29 @@ impl Aabb {
         [0, 1, 2].map(|i| 0.5 * (self.max[i] + self.min[i]))
     }
 
+    /// The longest of the three sides.
+    pub fn longest_side(&self) -> f64 {
+        self.extent().into_iter().fold(0.0, f64::max)
+    }
+
     pub fn of(points: &[[f64; 3]]) -> Option<Aabb> {
-        let first = *points.first()?;
-        let mut b = Aabb {
-            min: first,
-            max: first,
-        };
-        for p in points {
-            b.min = [0, 1, 2].map(|i| b.min[i].min(p[i]));
-            b.max = [0, 1, 2].map(|i| b.max[i].max(p[i]));
-        }
-        Some(b)
+        Aabb::of_iter(points.iter().copied())
+    }
+
+    /// The box of points as they come, e.g. transformed on the way; `None` when there are none.
+    pub fn of_iter(points: impl IntoIterator<Item = [f64; 3]>) -> Option<Aabb> {
+        let mut points = points.into_iter();
+        let first = points.next()?;
+        Some(points.fold(
+            Aabb {
+                min: first,
+                max: first,
+            },
+            |b, p| Aabb {
+                min: [0, 1, 2].map(|i| b.min[i].min(p[i])),
+                max: [0, 1, 2].map(|i| b.max[i].max(p[i])),
+            },
+        ))
     }
 }
 

@@ -10,7 +10,7 @@
 //! input's +x axis seen from above (for a y-up input, from above means looking down −y). The
 //! canonical pose has heading 90° in y-up coordinates.
 
-use crate::core::cloud::PointCloud;
+use crate::core::cloud::{Aabb, PointCloud};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -87,7 +87,7 @@ impl Frame {
     pub fn fit(cloud: &PointCloud, up: UpAxis) -> Result<Frame, FrameError> {
         let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
         let size = bounds.extent();
-        let extent = size.iter().cloned().fold(0.0, f64::max);
+        let extent = bounds.longest_side();
         if extent.is_nan() || extent <= 0.0 {
             return Err(FrameError::ZeroExtent);
         }
@@ -113,20 +113,18 @@ impl Frame {
         let rotation = mat_mul(&yaw_to_canonical(heading), &upright(up));
         // Turned about the axis-aligned centre, so georeferenced offsets cost no precision.
         let origin = bounds.center();
-        let mut lo = [f64::MAX; 3];
-        let mut hi = [f64::MIN; 3];
-        for p in &cloud.positions {
-            let q = apply(&rotation, [0, 1, 2].map(|i| p[i] - origin[i]));
-            for i in 0..3 {
-                lo[i] = lo[i].min(q[i]);
-                hi[i] = hi[i].max(q[i]);
-            }
-        }
-        let extent = (0..3).map(|i| hi[i] - lo[i]).fold(0.0, f64::max);
+        let turned = Aabb::of_iter(
+            cloud
+                .positions
+                .iter()
+                .map(|p| apply(&rotation, [0, 1, 2].map(|i| p[i] - origin[i]))),
+        )
+        .ok_or(FrameError::Empty)?;
+        let extent = turned.longest_side();
         if extent.is_nan() || extent <= 0.0 {
             return Err(FrameError::ZeroExtent);
         }
-        let offset = apply_transposed(&rotation, [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0));
+        let offset = apply_transposed(&rotation, turned.center());
         Ok(Frame {
             center: [0, 1, 2].map(|i| origin[i] + offset[i]),
             extent,

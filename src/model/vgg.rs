@@ -71,14 +71,14 @@ impl Vgg19 {
                     .with_regex(r"^features\.")
                     .map_indices_contiguous(true),
             )
-            .map_err(|e| WeightsError::Vgg(e.to_string()))?
+            .map_err(|e| WeightsError::Load(e.into()))?
         } else {
             vgg.load_from(
                 &mut SafetensorsStore::from_file(path)
                     .with_regex(r"^features\.")
                     .map_indices_contiguous(true),
             )
-            .map_err(|e| WeightsError::Vgg(e.to_string()))?
+            .map_err(|e| WeightsError::Load(e.into()))?
         };
         if let Some((name, why)) = result.missing.first() {
             return Err(WeightsError::Vgg(format!(
@@ -103,10 +103,8 @@ impl Vgg19 {
             })
             .with_key_remapping(r"^torchvision\.", "features.");
         self.save_into(&mut store)
-            .map_err(|e| WeightsError::Save(e.to_string()))?;
-        store
-            .get_bytes()
-            .map_err(|e| WeightsError::Save(e.to_string()))
+            .map_err(|e| WeightsError::Save(e.into()))?;
+        store.get_bytes().map_err(|e| WeightsError::Save(e.into()))
     }
 
     /// ReLU outputs of every convolution.

@@ -48,18 +48,32 @@ pub enum WeightsError {
     },
     #[error("format version {found}, this mvpcc reads version {FORMAT_VERSION}")]
     Version { found: String },
+    #[error("its metadata has no {KEY_CONFIG}")]
+    MissingConfig,
     #[error("its model config is unreadable: {0}")]
-    Config(String),
+    Config(#[source] serde_json::Error),
     #[error("its model config is invalid: {0}")]
     InvalidConfig(#[from] ConfigError),
     #[error("expected model config {expected}, the file has {found}")]
     ConfigMismatch { expected: String, found: String },
+    #[error("its orienter config is invalid: {0}")]
+    InvalidOrienter(String),
     #[error("its tensors do not fit the config it declares: {0}")]
     Tensors(String),
+    #[error("its tensors could not be read: {}", one_line(.0))]
+    Load(#[source] Cause),
     #[error("not usable as VGG19 weights: {0}")]
     Vgg(String),
     #[error("could not serialize the weights: {0}")]
-    Save(String),
+    Save(#[source] Cause),
+}
+
+/// A third-party error kept as the source of a [`WeightsError`].
+pub type Cause = Box<dyn std::error::Error + Send + Sync>;
+
+/// Burn's store errors span several lines; errors here are one.
+fn one_line(error: &Cause) -> String {
+    error.to_string().replace('\n', " ")
 }
 
 /// The `__metadata__` map of a safetensors file, read without touching the tensors.
@@ -108,11 +122,8 @@ pub(crate) fn read_declared<C: serde::de::DeserializeOwned>(
     if version != FORMAT_VERSION.to_string() {
         return Err(WeightsError::Version { found: version });
     }
-    serde_json::from_str(
-        meta.get(KEY_CONFIG)
-            .ok_or_else(|| WeightsError::Config(format!("no {KEY_CONFIG} in the metadata")))?,
-    )
-    .map_err(|e| WeightsError::Config(e.to_string()))
+    serde_json::from_str(meta.get(KEY_CONFIG).ok_or(WeightsError::MissingConfig)?)
+        .map_err(WeightsError::Config)
 }
 
 pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
@@ -120,17 +131,15 @@ pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
     network: Network,
     config: &C,
 ) -> Result<Vec<u8>, WeightsError> {
-    let config = serde_json::to_string(config).map_err(|e| WeightsError::Save(e.to_string()))?;
+    let config = serde_json::to_string(config).map_err(|e| WeightsError::Save(e.into()))?;
     let mut store = SafetensorsStore::from_bytes(None)
         .metadata(KEY_KIND, network.name())
         .metadata(KEY_VERSION, FORMAT_VERSION.to_string())
         .metadata(KEY_CONFIG, config);
     module
         .save_into(&mut store)
-        .map_err(|e| WeightsError::Save(e.to_string()))?;
-    store
-        .get_bytes()
-        .map_err(|e| WeightsError::Save(e.to_string()))
+        .map_err(|e| WeightsError::Save(e.into()))?;
+    store.get_bytes().map_err(|e| WeightsError::Save(e.into()))
 }
 
 pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
@@ -141,7 +150,7 @@ pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), Weigh
         .validate(false);
     let result = module
         .load_from(&mut store)
-        .map_err(|e| WeightsError::Tensors(e.to_string().replace('\n', " ")))?;
+        .map_err(|e| WeightsError::Load(e.into()))?;
     let problem = |count: usize, what: &str, example: String| {
         WeightsError::Tensors(format!("{count} {what}, e.g. {example}"))
     };
@@ -348,7 +357,7 @@ mod tests {
         ));
         assert!(matches!(
             err(&good[..good.len() / 2]),
-            WeightsError::Tensors(_)
+            WeightsError::Load(_)
         ));
 
         let d = config.init_discriminator(&device).unwrap();

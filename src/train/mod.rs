@@ -184,11 +184,11 @@ fn read_file(path: &Path) -> Result<Vec<u8>, TrainError> {
     std::fs::read(path).map_err(io_err(path))
 }
 
-impl TrainSettings {
-    /// The original schedule: lr 1e-4 → 1e-5 → 1e-6.
-    pub fn new(views: Vec<usize>) -> TrainSettings {
+impl Default for TrainSettings {
+    /// The original schedule (lr 1e-4 → 1e-5 → 1e-6) on the rig's default views.
+    fn default() -> TrainSettings {
         TrainSettings {
-            views,
+            views: crate::core::camera::DEFAULT_VIEWS.to_vec(),
             batch: 4,
             accumulate: 1,
             stage_rates: vec![1e-4, 1e-5, 1e-6],
@@ -213,12 +213,41 @@ impl TrainSettings {
             tv_from_stage: default_tv_from_stage(),
         }
     }
+}
+
+impl TrainSettings {
+    /// Refuses settings no run can train with.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        let problem = if self.batch == 0 || self.accumulate == 0 {
+            "batch and accumulate must be at least 1"
+        } else if !(0.0..1.0).contains(&self.val_fraction) {
+            "the validation fraction must lie in [0, 1)"
+        } else if self.stage_rates.is_empty()
+            || self.stage_rates.iter().any(|r| !r.is_finite() || *r <= 0.0)
+        {
+            "the learning rates must be positive numbers"
+        } else if self.stage_steps == 0 {
+            "a stage must have at least 1 step"
+        } else if self.views.is_empty() {
+            "at least one view is needed"
+        } else if self.tv_from_stage == 0 {
+            "stages are counted from 1"
+        } else {
+            return Ok(());
+        };
+        Err(SettingsError(problem))
+    }
 
     /// The most steps the stages can take together.
     pub fn planned_steps(&self) -> u64 {
         self.stage_steps * self.stage_rates.len() as u64
     }
 }
+
+/// What [`TrainSettings::validate`] refuses.
+#[derive(Debug, Error)]
+#[error("{0}")]
+pub struct SettingsError(&'static str);
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -645,6 +674,24 @@ impl Interval {
 mod tests {
     use super::*;
     use validate::ImageScores;
+
+    #[test]
+    fn default_settings_are_valid_and_broken_ones_are_refused() {
+        assert!(TrainSettings::default().validate().is_ok());
+        let broken: [fn(&mut TrainSettings); 6] = [
+            |s| s.batch = 0,
+            |s| s.accumulate = 0,
+            |s| s.val_fraction = 1.0,
+            |s| s.stage_rates = vec![1e-4, f64::NAN],
+            |s| s.stage_steps = 0,
+            |s| s.tv_from_stage = 0,
+        ];
+        for (i, breaks) in broken.iter().enumerate() {
+            let mut settings = TrainSettings::default();
+            breaks(&mut settings);
+            assert!(settings.validate().is_err(), "case {i}");
+        }
+    }
 
     fn scores(cd: Option<f64>) -> Scores {
         let image = ImageScores {

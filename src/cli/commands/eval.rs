@@ -5,6 +5,7 @@ use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
 use mvpcc::datagen::scan::PartialSpec;
+use mvpcc::io::batch::walk;
 use mvpcc::io::Format;
 use mvpcc::metrics::{compare_clouds, compare_images, CloudMetrics, FScore, ImageMetrics};
 use mvpcc::views::projection::CHANNELS;
@@ -19,24 +20,24 @@ struct Pair {
     gt: PathBuf,
 }
 
+/// The clouds under `dir` (walked as `complete --input-dir` walks), keyed by their path
+/// relative to `dir` without the extension, so a batch's output tree pairs with its ground
+/// truth's.
 fn cloud_files(dir: &Path, format: Option<Format>) -> anyhow::Result<BTreeMap<String, PathBuf>> {
-    let entries =
-        std::fs::read_dir(dir).with_context(|| format!("{}: cannot list", dir.display()))?;
+    let relative = walk(dir, |path| {
+        format.is_some() || Format::from_path(path).is_ok()
+    })?;
     let mut files = BTreeMap::new();
-    for entry in entries {
-        let path = entry.with_context(|| dir.display().to_string())?.path();
-        if !path.is_file() || (format.is_none() && Format::from_path(&path).is_err()) {
-            continue;
-        }
-        if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
-            if let Some(other) = files.insert(stem.to_string(), path.clone()) {
-                bail!(
-                    "{}: two clouds share the stem '{stem}' ({} and {})",
-                    dir.display(),
-                    other.display(),
-                    path.display()
-                );
-            }
+    for path in relative {
+        let key = path.with_extension("").to_string_lossy().into_owned();
+        let path = dir.join(path);
+        if let Some(other) = files.insert(key.clone(), path.clone()) {
+            bail!(
+                "{}: two clouds share the name '{key}' ({} and {})",
+                dir.display(),
+                other.display(),
+                path.display()
+            );
         }
     }
     Ok(files)

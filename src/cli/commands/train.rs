@@ -6,7 +6,6 @@ use crate::cli::args::TrainArgs;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use indicatif::{ProgressBar, ProgressStyle};
-use mvpcc::core::camera::DEFAULT_VIEWS;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{ModelConfig, Preset};
 use mvpcc::train::{
@@ -113,23 +112,7 @@ fn differing_field(a: &Value, b: &Value, except: &[&str], path: &str) -> Option<
 
 fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {
     model.validate()?;
-    if settings.batch == 0 || settings.accumulate == 0 {
-        bail!("--batch and --accumulate must be at least 1");
-    }
-    if !(0.0..1.0).contains(&settings.val_fraction) {
-        bail!("--val-fraction must lie in [0, 1)");
-    }
-    if settings
-        .stage_rates
-        .iter()
-        .any(|r| !r.is_finite() || *r <= 0.0)
-    {
-        bail!("--lr must be a positive number");
-    }
-    if settings.stage_steps == 0 {
-        bail!("--stage-steps must be at least 1");
-    }
-    Ok(())
+    Ok(settings.validate()?)
 }
 
 /// The settings and model config of the run: from the options on a new run, from the run's
@@ -163,7 +146,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         }
         (settings, model)
     } else {
-        let mut settings = apply(args, TrainSettings::new(DEFAULT_VIEWS.to_vec()));
+        let mut settings = apply(args, TrainSettings::default());
         settings.init = args
             .init
             .as_deref()

@@ -5,6 +5,7 @@
 //! front as `(cos h, sin h)`. The heading is the axis's end nearer the front estimate.
 
 use super::{angle_between, toward};
+use crate::core::cloud::Aabb;
 use crate::core::rng::Lcg;
 use crate::model::weights::{apply, read_declared, to_bytes, Network, WeightsError};
 use burn::config::Config;
@@ -104,18 +105,12 @@ pub fn target(heading: f64) -> [f32; 4] {
 /// 1, as the network reads them. Points are drawn with a fixed stride from a random start, or
 /// repeated when there are fewer.
 pub fn sample_points(points: &[[f64; 3]], count: usize, rng: &mut Lcg) -> Vec<f32> {
-    let mut lo = [f64::MAX; 3];
-    let mut hi = [f64::MIN; 3];
-    for p in points {
-        for i in 0..3 {
-            lo[i] = lo[i].min(p[i]);
-            hi[i] = hi[i].max(p[i]);
-        }
-    }
-    let center = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
-    let extent = (0..3)
-        .map(|i| hi[i] - lo[i])
-        .fold(f64::MIN_POSITIVE, f64::max);
+    let bounds = Aabb::of(points).unwrap_or(Aabb {
+        min: [0.0; 3],
+        max: [0.0; 3],
+    });
+    let center = bounds.center();
+    let extent = bounds.longest_side().max(f64::MIN_POSITIVE);
     let n = points.len();
     let start = rng.below(n.max(1));
     let mut out = Vec::with_capacity(count * 3);
@@ -150,7 +145,7 @@ impl Orienter {
 
     pub fn from_bytes(bytes: &[u8], device: Device) -> Result<Orienter, WeightsError> {
         let config: OrienterConfig = read_declared(bytes, Network::Orienter)?;
-        config.validate().map_err(WeightsError::Config)?;
+        config.validate().map_err(WeightsError::InvalidOrienter)?;
         let mut net = OrienterNet::new(&config, &device);
         apply(&mut net, bytes)?;
         Ok(Orienter::new(net, config, device))

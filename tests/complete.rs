@@ -121,6 +121,15 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
         .map(|p| p[0] - 650_123.25)
         .fold(f64::MAX, f64::min);
     assert!((far_flank + 0.9).abs() < 0.1, "far flank at {far_flank} m");
+    // The plane is reported in the input's coordinates too: across the car, through its middle.
+    let plane = &report["symmetry_plane"];
+    let coordinate = |key: &str, i: usize| plane[key][i].as_f64().unwrap();
+    assert!(coordinate("normal", 0).abs() > 0.99, "{plane}");
+    assert!((coordinate("point", 0) - 650_123.25).abs() < 0.1, "{plane}");
+    assert!(
+        ["supported", "refined", "pairs", "held-back"].contains(&plane["fit"].as_str().unwrap()),
+        "{plane}"
+    );
 
     let png = image::open(&preview).unwrap();
     assert!(png.width() > 300 && png.height() > 300);

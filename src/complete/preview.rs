@@ -1,6 +1,8 @@
 //! `complete --preview`: input and completed cloud side by side from three viewpoints, the
-//! completed points tinted, as one PNG — what a person checks first.
+//! completed points tinted, the symmetry plane outlined, as one PNG — what a person checks
+//! first.
 
+use crate::core::cloud::Aabb;
 use crate::core::glyphs::text;
 use image::{Rgb, RgbImage};
 
@@ -11,6 +13,8 @@ const BACKGROUND: Rgb<u8> = Rgb([28, 30, 34]);
 const INK: Rgb<u8> = Rgb([230, 230, 230]);
 /// Completed points are blended halfway towards this.
 const TINT: [f64; 3] = [255.0, 120.0, 0.0];
+/// The symmetry plane's outline.
+const PLANE_INK: Rgb<u8> = Rgb([0, 200, 255]);
 
 /// Viewpoints as (yaw, pitch) in degrees: three-quarter from the front left and above, the
 /// side, and the top.
@@ -23,6 +27,8 @@ pub struct Layer<'a> {
     pub colors: Option<&'a [[u8; 3]]>,
     pub added: &'a [bool],
     pub title: String,
+    /// The symmetry plane `x = offset`, outlined where it cuts the points' box.
+    pub plane: Option<f64>,
 }
 
 /// Two columns (input, output), one row per viewpoint.
@@ -33,26 +39,55 @@ pub fn render(left: &Layer, right: &Layer) -> RgbImage {
         let x0 = column as u32 * TILE;
         text(&mut img, x0 as i64 + 8, 6, &layer.title, 2, INK);
         for (row, &(yaw, pitch)) in VIEWPOINTS.iter().enumerate() {
-            draw(&mut img, layer, x0, HEADER + row as u32 * TILE, yaw, pitch);
+            let view = View { yaw, pitch };
+            draw(&mut img, layer, x0, HEADER + row as u32 * TILE, view);
+            if let Some(offset) = layer.plane {
+                outline_plane(
+                    &mut img,
+                    layer,
+                    offset,
+                    x0,
+                    HEADER + row as u32 * TILE,
+                    view,
+                );
+            }
         }
     }
     img
 }
 
-/// Orthographic splatting with a depth buffer, 2×2 pixels a point, shaded by depth.
-fn draw(img: &mut RgbImage, layer: &Layer, x0: u32, y0: u32, yaw: f64, pitch: f64) {
-    let (sy, cy) = yaw.to_radians().sin_cos();
-    let (sp, cp) = pitch.to_radians().sin_cos();
-    let scale = TILE as f64 * 0.9;
-    let mut depth = vec![f64::MAX; (TILE * TILE) as usize];
-    for (i, p) in layer.points.iter().enumerate() {
-        // Turn about the vertical, then tilt towards the viewer; depth grows away from it.
+/// An orthographic viewpoint, degrees.
+#[derive(Clone, Copy)]
+struct View {
+    yaw: f64,
+    pitch: f64,
+}
+
+impl View {
+    /// Tile pixel coordinates (u right, v down) and depth (growing away from the viewer).
+    fn project(self, p: [f64; 3]) -> (f64, f64, f64) {
+        let (sy, cy) = self.yaw.to_radians().sin_cos();
+        let (sp, cp) = self.pitch.to_radians().sin_cos();
+        let scale = TILE as f64 * 0.9;
+        // Turn about the vertical, then tilt towards the viewer.
         let x = cy * p[0] - sy * p[2];
         let z = sy * p[0] + cy * p[2];
         let y = cp * p[1] - sp * z;
         let d = sp * p[1] + cp * z;
-        let u = (TILE as f64 / 2.0 + x * scale) as i64;
-        let v = (TILE as f64 / 2.0 - y * scale) as i64;
+        (
+            TILE as f64 / 2.0 + x * scale,
+            TILE as f64 / 2.0 - y * scale,
+            d,
+        )
+    }
+}
+
+/// Orthographic splatting with a depth buffer, 2×2 pixels a point, shaded by depth.
+fn draw(img: &mut RgbImage, layer: &Layer, x0: u32, y0: u32, view: View) {
+    let mut depth = vec![f64::MAX; (TILE * TILE) as usize];
+    for (i, p) in layer.points.iter().enumerate() {
+        let (u, v, d) = view.project(*p);
+        let (u, v) = (u as i64, v as i64);
         let base = layer
             .colors
             .map_or([200.0, 200.0, 200.0], |c| c[i].map(f64::from));
@@ -77,6 +112,32 @@ fn draw(img: &mut RgbImage, layer: &Layer, x0: u32, y0: u32, yaw: f64, pitch: f6
     }
 }
 
+/// The rectangle where the plane `x = offset` cuts the layer's box, drawn over the points.
+fn outline_plane(img: &mut RgbImage, layer: &Layer, offset: f64, x0: u32, y0: u32, view: View) {
+    let Some(b) = Aabb::of(layer.points) else {
+        return;
+    };
+    let corners = [
+        [offset, b.min[1], b.min[2]],
+        [offset, b.max[1], b.min[2]],
+        [offset, b.max[1], b.max[2]],
+        [offset, b.min[1], b.max[2]],
+    ];
+    for k in 0..4 {
+        let (a, c) = (view.project(corners[k]), view.project(corners[(k + 1) % 4]));
+        let steps = ((c.0 - a.0).abs().max((c.1 - a.1).abs()) * 2.0)
+            .ceil()
+            .max(1.0) as usize;
+        for s in 0..=steps {
+            let t = s as f64 / steps as f64;
+            let (u, v) = (a.0 + t * (c.0 - a.0), a.1 + t * (c.1 - a.1));
+            if (0.0..TILE as f64).contains(&u) && (0.0..TILE as f64).contains(&v) {
+                img.put_pixel(x0 + u as u32, y0 + v as u32, PLANE_INK);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -90,6 +151,7 @@ mod tests {
             colors: Some(&colors),
             added: &[false, true],
             title: "IN".into(),
+            plane: None,
         };
         let img = render(&layer, &layer);
         // The side view looks from +x: both points fall on its centre, the nearer blue one wins.
@@ -112,5 +174,30 @@ mod tests {
             drawn.iter().any(|p| p.0[2] > 100 && p.0[0] == 0),
             "plain blue"
         );
+    }
+
+    #[test]
+    fn the_plane_is_outlined_in_every_view_of_its_layer_only() {
+        let points = [[-0.2, -0.1, -0.5], [0.2, 0.1, 0.5]];
+        let layer = |plane| Layer {
+            points: &points,
+            colors: None,
+            added: &[false, false],
+            title: String::new(),
+            plane,
+        };
+        let img = render(&layer(None), &layer(Some(0.05)));
+        let inked = |column: u32, row: u32| {
+            (0..TILE)
+                .flat_map(|x| (0..TILE).map(move |y| (x, y)))
+                .filter(|&(x, y)| {
+                    *img.get_pixel(column * TILE + x, HEADER + row * TILE + y) == PLANE_INK
+                })
+                .count()
+        };
+        for row in 0..VIEWPOINTS.len() as u32 {
+            assert_eq!(inked(0, row), 0, "no plane on the left, row {row}");
+            assert!(inked(1, row) > 100, "an outline on the right, row {row}");
+        }
     }
 }

@@ -51,6 +51,31 @@ impl KnnIndex {
         out
     }
 
+    /// For each query, the indices of its `k` nearest indexed points, nearest first, written
+    /// into `out[q * k..(q + 1) * k]`; fewer than `k` indexed points repeat the farthest.
+    pub fn k_nearest(&self, queries: &[[f64; 3]], k: usize) -> Vec<usize> {
+        let mut out = vec![0; queries.len() * k];
+        let Some(k_nz) = NonZero::new(k.min(self.len)) else {
+            return out;
+        };
+        out.par_chunks_mut(k)
+            .zip(queries.par_iter())
+            .with_min_len(256)
+            .for_each(|(row, q)| {
+                let found = self
+                    .tree
+                    .query(q)
+                    .nearest_n::<SquaredEuclidean<f64>>(k_nz)
+                    .execute();
+                let mut last = 0;
+                for (i, slot) in row.iter_mut().enumerate() {
+                    last = found.get(i).map_or(last, |r| r.item as usize);
+                    *slot = last;
+                }
+            });
+        out
+    }
+
     /// For each query, the index of its nearest indexed point and the distance to it.
     pub fn nearest(&self, queries: &[[f64; 3]]) -> Vec<(usize, f64)> {
         queries

@@ -6,11 +6,12 @@ use burn::tensor::Device;
 use mvpcc::complete::clean::CleanReport;
 use mvpcc::complete::orient::{OrientMode, Orienter};
 use mvpcc::complete::preview::{render, Layer};
+use mvpcc::complete::symmetry::{Plane, PlaneFit};
 use mvpcc::complete::{
     Completer, Completion, Method, Options, Run, Settings, Timings, DEFAULT_MODEL, SYNTHETIC,
 };
 use mvpcc::core::cloud::PointCloud;
-use mvpcc::core::frame::UpAxis;
+use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
 use mvpcc::io::{atomic_write, check_output, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
@@ -171,12 +172,31 @@ struct FileReport {
     seconds: BTreeMap<String, f64>,
 }
 
-/// The symmetry plane `x = x` in the normalized frame, and the share of points it mirrors onto
-/// others.
+/// The symmetry plane: `x = x` in the normalized frame, a point on it and its unit normal in
+/// the input's coordinates, the share of points it mirrors onto others, and how it was placed.
 #[derive(Debug, Serialize)]
 struct PlaneReport {
     x: f64,
+    point: [f64; 3],
+    normal: [f64; 3],
     support: f64,
+    fit: PlaneFit,
+}
+
+impl PlaneReport {
+    fn of(plane: &Plane, frame: &Frame) -> PlaneReport {
+        let point = frame.to_input([plane.offset, 0.0, 0.0]);
+        let ahead = frame.to_input([plane.offset + 1.0, 0.0, 0.0]);
+        // One normalized unit is `extent` input units.
+        let normal = [0, 1, 2].map(|i| (ahead[i] - point[i]) / frame.extent);
+        PlaneReport {
+            x: plane.offset,
+            point,
+            normal,
+            support: plane.support,
+            fit: plane.fit,
+        }
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -272,10 +292,7 @@ fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timing
         added: done.added,
         mirrored: done.mirrored,
         filtered_out: done.filtered_out,
-        symmetry_plane: done.plane.map(|p| PlaneReport {
-            x: p.offset,
-            support: p.support,
-        }),
+        symmetry_plane: done.plane.map(|p| PlaneReport::of(&p, &done.frame)),
         orientation: OrientationReport {
             heading: run.orientation.heading,
             method: run.orientation.method,
@@ -324,12 +341,14 @@ fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::
         colors: input.colors.as_deref(),
         added: &none,
         title: format!("INPUT {}", done.input_points),
+        plane: None,
     };
     let right = Layer {
         points: &done.normalized,
         colors: done.cloud.colors.as_deref(),
         added: &flags,
         title: format!("OUTPUT {} +{}", done.cloud.len(), done.added),
+        plane: done.plane.map(|p| p.offset),
     };
     let img = render(&left, &right);
     atomic_write(path, |w| {
@@ -368,7 +387,7 @@ struct BatchReport {
 #[derive(Debug, Serialize)]
 #[serde(tag = "status", rename_all = "snake_case")]
 enum BatchEntry {
-    Completed(FileReport),
+    Completed(Box<FileReport>),
     /// `--skip-existing` found the output.
     Skipped {
         input: PathBuf,
@@ -448,7 +467,7 @@ fn batch_entry(
             complete_file(&input, &output, views, args, completer, quiet)
         });
     match result {
-        Ok(report) => BatchEntry::Completed(report),
+        Ok(report) => BatchEntry::Completed(Box::new(report)),
         Err(e) => BatchEntry::Failed {
             input,
             error: format!("{e:#}").replace('\n', " "),

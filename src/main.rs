@@ -9,8 +9,7 @@ fn main() -> ExitCode {
     match cli::commands::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            let message = format!("{e:#}").replace('\n', " ");
-            eprintln!("error: {message}");
+            eprintln!("error: {}", cli::one_line(&e));
             ExitCode::FAILURE
         }
     }

@@ -10,7 +10,7 @@ use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
 use mvpcc::datagen::mesh::SignedAxis;
-use mvpcc::datagen::scan::PartialKinds;
+use mvpcc::datagen::scan::{PartialKinds, PartialParams};
 use mvpcc::datagen::synth::Category;
 use mvpcc::io::batch::Shard;
 use mvpcc::io::{Encoding, Format};
@@ -19,6 +19,7 @@ use mvpcc::model::loss::Adversarial;
 use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
+use mvpcc::views::reprojection::ReprojectOptions;
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
@@ -354,13 +355,13 @@ pub struct ReprojectArgs {
     pub views: Option<ViewList>,
     /// Erosion element side in pixels before re-projection; 0 = off. Meant for dense
     /// (inpainted) views: it removes most of a raw sparse scan.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = ReprojectOptions::default().erode)]
     pub erode: usize,
     /// Median window side over each view's XYZ before re-projection (pixels); 0 = off.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = ReprojectOptions::default().smooth)]
     pub smooth: usize,
     /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
-    #[arg(long, default_value_t = 1e-4)]
+    #[arg(long, default_value_t = ReprojectOptions::default().dedup_tolerance)]
     pub dedup: f64,
     /// Write normalized coordinates even when the directory has a frame.json.
     #[arg(long)]
@@ -480,18 +481,18 @@ pub struct PrepareArgs {
     #[arg(long, default_value_t = 1.0 / 256.0)]
     pub gt_voxel: f32,
     /// Which partial scans to make.
-    #[arg(long, value_enum, default_value_t = PartialKinds::Both)]
+    #[arg(long, value_enum, default_value_t = PartialParams::default().kinds)]
     pub partial: PartialKinds,
     /// Fewest points a partial is aimed at (drawn log-uniformly up to --max-points).
-    #[arg(long, default_value_t = 2_000)]
+    #[arg(long, default_value_t = PartialParams::default().min_points)]
     pub min_points: usize,
-    #[arg(long, default_value_t = 130_000)]
+    #[arg(long, default_value_t = PartialParams::default().max_points)]
     pub max_points: usize,
     /// Largest angle (degrees) between the simulated scanner's path and the object's axis.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = PartialParams::default().max_yaw_deg)]
     pub yaw_error: f32,
     /// Largest range-noise standard deviation of the scanner (normalized units).
-    #[arg(long, default_value_t = 0.002)]
+    #[arg(long, default_value_t = PartialParams::default().max_noise)]
     pub noise: f32,
     /// The meshes' up axis (x, y, z, -x, -y, -z).
     #[arg(long, default_value = "y", allow_hyphen_values = true)]

@@ -3,3 +3,33 @@
 
 pub mod args;
 pub mod commands;
+
+/// The error and its causes joined by ": " on one line. A cause whose text an outer error
+/// already quotes (as `"{path}: {source}"` messages do) is not repeated.
+pub fn one_line(e: &anyhow::Error) -> String {
+    let mut message = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string().replace('\n', " ");
+        if !message.contains(&text) {
+            if !message.is_empty() {
+                message.push_str(": ");
+            }
+            message.push_str(&text);
+        }
+    }
+    message
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    #[test]
+    fn causes_are_joined_on_one_line_and_quoted_ones_not_repeated() {
+        let cause = || std::io::Error::other("header\ntoo small");
+        let e = anyhow::Error::new(cause()).context("reading a.ply");
+        assert_eq!(one_line(&e), "reading a.ply: header too small");
+        let e = anyhow::Error::new(cause()).context("a.ply: header too small");
+        assert_eq!(one_line(&e), "a.ply: header too small");
+    }
+}

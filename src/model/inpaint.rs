@@ -24,7 +24,7 @@ pub enum InpaintError {
         found: usize,
         expected: usize,
     },
-    #[error("the device failed: {0}")]
+    #[error("the device failed")]
     Device(#[source] crate::model::weights::Cause),
 }
 

@@ -71,14 +71,14 @@ impl Vgg19 {
                     .with_regex(r"^features\.")
                     .map_indices_contiguous(true),
             )
-            .map_err(|e| WeightsError::Load(e.into()))?
+            .map_err(|e| WeightsError::VggLoad(e.into()))?
         } else {
             vgg.load_from(
                 &mut SafetensorsStore::from_file(path)
                     .with_regex(r"^features\.")
                     .map_indices_contiguous(true),
             )
-            .map_err(|e| WeightsError::Load(e.into()))?
+            .map_err(|e| WeightsError::VggLoad(e.into()))?
         };
         if let Some((name, why)) = result.missing.first() {
             return Err(WeightsError::Vgg(format!(

@@ -50,7 +50,7 @@ pub enum WeightsError {
     Version { found: String },
     #[error("its metadata has no {KEY_CONFIG}")]
     MissingConfig,
-    #[error("its model config is unreadable: {0}")]
+    #[error("its model config is unreadable")]
     Config(#[source] serde_json::Error),
     #[error("its model config is invalid: {0}")]
     InvalidConfig(#[from] ConfigError),
@@ -60,21 +60,19 @@ pub enum WeightsError {
     InvalidOrienter(String),
     #[error("its tensors do not fit the config it declares: {0}")]
     Tensors(String),
-    #[error("its tensors could not be read: {}", one_line(.0))]
+    #[error("its tensors could not be read")]
     Load(#[source] Cause),
     #[error("not usable as VGG19 weights: {0}")]
     Vgg(String),
-    #[error("could not serialize the weights: {0}")]
+    #[error("not usable as VGG19 weights")]
+    VggLoad(#[source] Cause),
+    #[error("could not serialize the weights")]
     Save(#[source] Cause),
 }
 
-/// A third-party error kept as the source of a [`WeightsError`].
+/// A third-party error kept as the source of a [`WeightsError`]: its text is the next link of
+/// the error's chain, not part of this one's.
 pub type Cause = Box<dyn std::error::Error + Send + Sync>;
-
-/// Burn's store errors span several lines; errors here are one.
-fn one_line(error: &Cause) -> String {
-    error.to_string().replace('\n', " ")
-}
 
 /// The `__metadata__` map of a safetensors file, read without touching the tensors.
 fn metadata(bytes: &[u8]) -> Result<BTreeMap<String, String>, WeightsError> {

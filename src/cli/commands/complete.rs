@@ -470,7 +470,7 @@ fn batch_entry(
         Ok(report) => BatchEntry::Completed(Box::new(report)),
         Err(e) => BatchEntry::Failed {
             input,
-            error: format!("{e:#}").replace('\n', " "),
+            error: crate::cli::one_line(&e),
         },
     }
 }

@@ -20,7 +20,7 @@
 use burn::tensor::Device;
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::symmetry::mirror;
-use mvpcc::complete::{Completer, Method, Options, Settings};
+use mvpcc::complete::{Completer, Completion, Method, Options, Settings};
 use mvpcc::core::cloud::{Aabb, PointCloud};
 use mvpcc::core::knn::KnnIndex;
 use mvpcc::core::rng::Lcg;
@@ -63,6 +63,19 @@ struct Sample {
     f1_true: f64,
 }
 
+/// `complete --method mirror` with everything estimated.
+fn mirrored(completer: &Completer, cloud: &PointCloud) -> Result<Completion, Error> {
+    let settings = Settings {
+        clean: false,
+        orient: OrientMode::Auto,
+        options: Options {
+            method: Method::Mirror,
+            ..Options::default()
+        },
+    };
+    Ok(completer.run(cloud, &settings)?.completion)
+}
+
 fn to_object(spec: &PartialSpec, p: [f64; 3]) -> [f64; 3] {
     spec.to_object_frame(p.map(|c| c as f32)).map(f64::from)
 }
@@ -95,15 +108,7 @@ fn measure(
     spec: &PartialSpec,
 ) -> Result<Measured, Error> {
     let cloud = read_cloud(partial, None)?.cloud;
-    let settings = Settings {
-        clean: false,
-        orient: OrientMode::Auto,
-        options: Options {
-            method: Method::Mirror,
-            ..Options::default()
-        },
-    };
-    let completion = completer.run(&cloud, &settings)?.completion;
+    let completion = mirrored(completer, &cloud)?;
     let measured: Vec<[f64; 3]> = cloud
         .positions
         .iter()
@@ -212,15 +217,7 @@ struct FoundPlane {
 }
 
 fn plane_of(completer: &Completer, cloud: &PointCloud) -> Result<Option<FoundPlane>, Error> {
-    let settings = Settings {
-        clean: false,
-        orient: OrientMode::Auto,
-        options: Options {
-            method: Method::Mirror,
-            ..Options::default()
-        },
-    };
-    let done = completer.run(cloud, &settings)?.completion;
+    let done = mirrored(completer, cloud)?;
     let Some(plane) = done.plane else {
         return Ok(None);
     };

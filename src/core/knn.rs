@@ -31,30 +31,36 @@ impl KnnIndex {
     /// written into `out[q * k..(q + 1) * k]`; fewer than `k` indexed points leave the tail
     /// as `f64::NAN`.
     pub fn k_nearest_distances(&self, queries: &[[f64; 3]], k: usize) -> Vec<f64> {
-        let mut out = vec![f64::NAN; queries.len() * k];
-        let Some(k_nz) = NonZero::new(k.min(self.len)) else {
-            return out;
-        };
-        out.par_chunks_mut(k)
-            .zip(queries.par_iter())
-            .with_min_len(256)
-            .for_each(|(row, q)| {
-                let found = self
-                    .tree
-                    .query(q)
-                    .nearest_n::<SquaredEuclidean<f64>>(k_nz)
-                    .execute();
-                for (slot, r) in row.iter_mut().zip(found) {
-                    *slot = r.distance.sqrt();
-                }
-            });
-        out
+        self.k_nearest_rows(queries, k, f64::NAN, |row, found| {
+            for (slot, &(d2, _)) in row.iter_mut().zip(found) {
+                *slot = d2.sqrt();
+            }
+        })
     }
 
     /// For each query, the indices of its `k` nearest indexed points, nearest first, written
     /// into `out[q * k..(q + 1) * k]`; fewer than `k` indexed points repeat the farthest.
     pub fn k_nearest(&self, queries: &[[f64; 3]], k: usize) -> Vec<usize> {
-        let mut out = vec![0; queries.len() * k];
+        self.k_nearest_rows(queries, k, 0, |row, found| {
+            let mut last = 0;
+            for (i, slot) in row.iter_mut().enumerate() {
+                last = found.get(i).map_or(last, |&(_, item)| item);
+                *slot = last;
+            }
+        })
+    }
+
+    /// A row of `k` values per query, each filled by `fill` from the query's nearest indexed
+    /// points as (squared distance, index), nearest first, fewer than `k` when the index holds
+    /// fewer; rows start as `empty`.
+    fn k_nearest_rows<T: Copy + Send + Sync>(
+        &self,
+        queries: &[[f64; 3]],
+        k: usize,
+        empty: T,
+        fill: impl Fn(&mut [T], &[(f64, usize)]) + Sync,
+    ) -> Vec<T> {
+        let mut out = vec![empty; queries.len() * k];
         let Some(k_nz) = NonZero::new(k.min(self.len)) else {
             return out;
         };
@@ -62,16 +68,15 @@ impl KnnIndex {
             .zip(queries.par_iter())
             .with_min_len(256)
             .for_each(|(row, q)| {
-                let found = self
+                let found: Vec<(f64, usize)> = self
                     .tree
                     .query(q)
                     .nearest_n::<SquaredEuclidean<f64>>(k_nz)
-                    .execute();
-                let mut last = 0;
-                for (i, slot) in row.iter_mut().enumerate() {
-                    last = found.get(i).map_or(last, |r| r.item as usize);
-                    *slot = last;
-                }
+                    .execute()
+                    .into_iter()
+                    .map(|r| (r.distance, r.item as usize))
+                    .collect();
+                fill(row, &found);
             });
         out
     }

@@ -58,13 +58,13 @@ pub enum PlaneFit {
 ///
 /// 1. **Support**: `c` across the cloud's x range, coarse to fine, where the most mirror images
 ///    land on measured points.
-/// 2. **Pairs**: point-to-plane ICP from there ([`Sample::refine_offset`]): only surfaces that
+/// 2. **Pairs**: point-to-plane ICP from there (`Sample::refine_offset`): only surfaces that
 ///    face across the width pull on the plane. A scan from one side (a drive-by) holds the near
 ///    flank, the roof and the near parts of the ends; their mirror images land on other points
 ///    wherever the plane sits on the flat ends and roof, and more of them do the nearer it moves
 ///    to the scanned side, so the best support leans a few hundredths towards it, while the
 ///    pairs on curved shoulders, wheel arches and corners do not lean. When the support is
-///    below [`MIN_SCORE`] (a flank and a strip of the roof, common on buses and trains) the
+///    below 5 % (a flank and a strip of the roof, common on buses and trains) the
 ///    pairs start from the middle of the width instead.
 /// 3. **Bound**: the scanned side's outermost points are the vehicle's widest there, so a plane
 ///    beyond the middle of the cloud's width, towards that side, would put the mirror images of

@@ -176,10 +176,7 @@ fn main() -> Result<(), Error> {
             let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
             let rotated = turned(&cloud, turn, pivot);
             let truth = (heading_in_partial(&sample.spec) + turn).rem_euclid(360.0);
-            let protocol = match sample.spec {
-                PartialSpec::Cameras { .. } => "cameras",
-                PartialSpec::Scanner { .. } => "scanner",
-            };
+            let protocol = sample.spec.protocol();
             for (name, mode) in MODES {
                 let found = orient(&rotated, UpAxis::Y, mode, Some(orienter));
                 let heading = found.heading.unwrap_or(f64::NAN);

@@ -325,10 +325,7 @@ fn main() -> Result<(), Error> {
             Ok(Sample {
                 name: format!("{}/{}/partial_{}", model.category, model.name, sample.k),
                 category: model.category.clone(),
-                kind: match sample.spec {
-                    PartialSpec::Cameras { .. } => "cameras",
-                    PartialSpec::Scanner { .. } => "scanner",
-                },
+                kind: sample.spec.protocol(),
                 offset,
                 angle,
                 towards_scanner,

@@ -67,16 +67,18 @@ impl KnnIndex {
         out.par_chunks_mut(k)
             .zip(queries.par_iter())
             .with_min_len(256)
-            .for_each(|(row, q)| {
-                let found: Vec<(f64, usize)> = self
-                    .tree
-                    .query(q)
-                    .nearest_n::<SquaredEuclidean<f64>>(k_nz)
-                    .execute()
-                    .into_iter()
-                    .map(|r| (r.distance, r.item as usize))
-                    .collect();
-                fill(row, &found);
+            // One buffer per worker, so the results cost no allocation beyond kiddo's own.
+            .for_each_init(Vec::new, |found, (row, q)| {
+                found.clear();
+                found.extend(
+                    self.tree
+                        .query(q)
+                        .nearest_n::<SquaredEuclidean<f64>>(k_nz)
+                        .execute()
+                        .into_iter()
+                        .map(|r| (r.distance, r.item as usize)),
+                );
+                fill(row, found);
             });
         out
     }

@@ -282,6 +282,14 @@ fn lateral(along: [f32; 3]) -> [f32; 3] {
 }
 
 impl PartialSpec {
+    /// The protocol's name in reports: "cameras" or "scanner".
+    pub fn protocol(&self) -> &'static str {
+        match self {
+            PartialSpec::Cameras { .. } => "cameras",
+            PartialSpec::Scanner { .. } => "scanner",
+        }
+    }
+
     /// Maps a point of this partial back into the object's (ground truth's) frame.
     pub fn to_object_frame(&self, q: [f32; 3]) -> [f32; 3] {
         match *self {

@@ -323,10 +323,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
             match find_prediction(&dir, sample.k) {
                 Some(pred) => samples.push(DataSample {
                     category: model.category.clone(),
-                    protocol: match sample.spec {
-                        PartialSpec::Cameras { .. } => "cameras",
-                        PartialSpec::Scanner { .. } => "scanner",
-                    },
+                    protocol: sample.spec.protocol(),
                     name,
                     pred,
                     gt: gt.clone(),

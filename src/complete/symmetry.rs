@@ -75,7 +75,7 @@ pub enum PlaneFit {
 /// 3. **Bound**: at any height the scanned side's outermost points are the vehicle's widest
 ///    there, so a plane beyond the middle of a horizontal slice's width, towards that side,
 ///    would put the mirror images of the far side's points outside it, where they would have
-///    been scanned: the plane is held back at the tightest such middle ([`slices_middle`]).
+///    been scanned: the plane is held back at the tightest such middle (`slices_middle`).
 ///
 /// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
 /// to 0.699, most of it on the 27 % of partials that had no plane before. `None` only when

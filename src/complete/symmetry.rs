@@ -581,18 +581,22 @@ mod tests {
         find_plane(&points)
     }
 
+    /// A cross-section's (x, y) points repeated along the length, 50 times 0.01 apart.
+    fn extruded(section: &[[f64; 2]]) -> Vec<[f64; 3]> {
+        (0..50)
+            .flat_map(|k| section.iter().map(move |&[x, y]| [x, y, k as f64 * 0.01]))
+            .collect()
+    }
+
     #[test]
     fn the_plane_is_held_back_at_the_slice_seen_on_both_sides() {
         // A near flank at x = 0.2 up to the shoulder, a narrower roof seen edge to edge at
         // y = 0.3: the whole x range's middle (0.025) pairs the flank with the far roof edge,
         // the roof's slice says where the plane is. The flank holds most points, as a
         // drive-by's does.
-        let mut points = Vec::new();
-        for k in 0..50 {
-            let z = k as f64 * 0.01;
-            points.extend((0..100).map(|i| [0.2, i as f64 * 0.002, z]));
-            points.extend((0..=60).map(|i| [-0.15 + i as f64 * 0.005, 0.3, z]));
-        }
+        let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
+        section.extend((0..=60).map(|i| [-0.15 + i as f64 * 0.005, 0.3]));
+        let points = extruded(&section);
         assert!((x_middle(&points) - 0.025).abs() < 1e-9);
         assert!(slices_middle(&points, 1.0).unwrap().abs() < 1e-9);
         assert!(
@@ -606,14 +610,10 @@ mod tests {
     fn a_cloud_seen_from_both_sides_is_held_back_at_its_whole_width() {
         // Both flanks seen, one at a shorter range (more points); a slice where the far flank
         // sticks out (a mirror, say) must not bound the plane.
-        let mut points = Vec::new();
-        for k in 0..50 {
-            let z = k as f64 * 0.01;
-            points.extend((0..60).map(|i| [0.2, i as f64 * 0.005, z]));
-            points.extend((0..40).map(|i| [-0.2, i as f64 * 0.0075, z]));
-            points.push([-0.3, 0.32, z]);
-            points.push([0.1, 0.32, z]);
-        }
+        let mut section: Vec<[f64; 2]> = (0..60).map(|i| [0.2, i as f64 * 0.005]).collect();
+        section.extend((0..40).map(|i| [-0.2, i as f64 * 0.0075]));
+        section.extend([[-0.3, 0.32], [0.1, 0.32]]);
+        let points = extruded(&section);
         let whole = x_middle(&points);
         assert!(slices_middle(&points, 1.0).unwrap() < whole - 0.04);
         assert_eq!(held_back(&points, 0.02), whole);

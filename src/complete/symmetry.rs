@@ -134,8 +134,8 @@ const ONE_SIDED: f64 = 0.75;
 /// whole cloud's range pairs the near flank's widest part with the far roof's edge, which is
 /// narrower, and so lies farther: on the validation split it leaned 0.8 % of the length
 /// towards the scanner (median), the slices' 0.2 %. `None` when no slice spans the width.
-fn slices_middle(points: &[[f64; 3]], scanned_side: f64) -> Option<f64> {
-    let bounds = Aabb::of(points)?;
+/// `bounds` is the points' box.
+fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<f64> {
     let width = bounds.max[0] - bounds.min[0];
     let slices = (((bounds.max[1] - bounds.min[1]) / SLICE_HEIGHT).ceil() as usize).max(1);
     // (lowest x, highest x, points) per slice.
@@ -152,12 +152,9 @@ fn slices_middle(points: &[[f64; 3]], scanned_side: f64) -> Option<f64> {
         .min_by(|a, b| (a * scanned_side).total_cmp(&(b * scanned_side)))
 }
 
-/// The middle of the points' x range.
+/// The middle of the points' x range (0 for no points).
 fn x_middle(points: &[[f64; 3]]) -> f64 {
-    let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-        (lo.min(p[0]), hi.max(p[0]))
-    });
-    (lo + hi) / 2.0
+    Aabb::of(points).map_or(0.0, |b| b.center()[0])
 }
 
 /// The plane offset `c`, held back at the middle of the slice seen widest on both sides
@@ -165,7 +162,10 @@ fn x_middle(points: &[[f64; 3]]) -> f64 {
 /// one side, [`ONE_SIDED`]) when it lies beyond it towards the better scanned side (see
 /// [`find_plane`]).
 fn held_back(points: &[[f64; 3]], c: f64) -> f64 {
-    let whole = x_middle(points);
+    let Some(bounds) = Aabb::of(points) else {
+        return c;
+    };
+    let whole = bounds.center()[0];
     let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
     // The side holding more of the points is the better scanned one.
     let scanned_side = (mean - whole).signum();
@@ -175,7 +175,7 @@ fn held_back(points: &[[f64; 3]], c: f64) -> f64 {
         .count() as f64
         / points.len() as f64;
     let middle = if near_share >= ONE_SIDED {
-        slices_middle(points, scanned_side).unwrap_or(whole)
+        slices_middle(points, &bounds, scanned_side).unwrap_or(whole)
     } else {
         whole
     };
@@ -598,7 +598,8 @@ mod tests {
         section.extend((0..=60).map(|i| [-0.15 + i as f64 * 0.005, 0.3]));
         let points = extruded(&section);
         assert!((x_middle(&points) - 0.025).abs() < 1e-9);
-        assert!(slices_middle(&points, 1.0).unwrap().abs() < 1e-9);
+        let bounds = Aabb::of(&points).unwrap();
+        assert!(slices_middle(&points, &bounds, 1.0).unwrap().abs() < 1e-9);
         assert!(
             held_back(&points, 0.02).abs() < 1e-9,
             "beyond it: held back"
@@ -615,7 +616,8 @@ mod tests {
         section.extend([[-0.3, 0.32], [0.1, 0.32]]);
         let points = extruded(&section);
         let whole = x_middle(&points);
-        assert!(slices_middle(&points, 1.0).unwrap() < whole - 0.04);
+        let bounds = Aabb::of(&points).unwrap();
+        assert!(slices_middle(&points, &bounds, 1.0).unwrap() < whole - 0.04);
         assert_eq!(held_back(&points, 0.02), whole);
     }
 

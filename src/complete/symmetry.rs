@@ -119,6 +119,11 @@ const SLICE_POINTS: usize = 20;
 /// that both sides of the vehicle are seen in it.
 const SLICE_SPAN: f64 = 0.5;
 
+/// How near a measured point the mirror image of a slice's far extreme must land (see
+/// [`paired`]). Chosen on the validation split among 0.01, 0.02, 0.025, 0.03, 0.035, 0.04,
+/// 0.05 and none (docs/completing.md).
+const PAIRED: f64 = 0.035;
+
 /// The slices bound the plane only when at least this share of the points lies on the better
 /// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
 /// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and
@@ -133,23 +138,43 @@ const ONE_SIDED: f64 = 0.75;
 /// both sides (often the roof's, seen from above) lies nearest the plane. The middle of the
 /// whole cloud's range pairs the near flank's widest part with the far roof's edge, which is
 /// narrower, and so lies farther: on the validation split it leaned 0.8 % of the length
-/// towards the scanner (median), the slices' 0.2 %. `None` when no slice spans the width.
-/// `bounds` is the points' box.
+/// towards the scanner (median), the slices' 0.2 %. A slice counts only where its far
+/// extreme's mirror image lands on a measured point ([`paired`]). `None` when no slice spans
+/// the width. `bounds` is the points' box.
 fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<f64> {
     let width = bounds.max[0] - bounds.min[0];
     let slices = (((bounds.max[1] - bounds.min[1]) / SLICE_HEIGHT).ceil() as usize).max(1);
-    // (lowest x, highest x, points) per slice.
-    let mut ranges = vec![(f64::MAX, f64::MIN, 0usize); slices];
-    for p in points {
-        let i = (((p[1] - bounds.min[1]) / SLICE_HEIGHT) as usize).min(slices - 1);
-        let r = &mut ranges[i];
-        *r = (r.0.min(p[0]), r.1.max(p[0]), r.2 + 1);
+    let slice_of =
+        |p: &[f64; 3]| (((p[1] - bounds.min[1]) / SLICE_HEIGHT) as usize).min(slices - 1);
+    let mut members = vec![Vec::new(); slices];
+    for (i, p) in points.iter().enumerate() {
+        members[slice_of(p)].push(i);
     }
-    ranges
+    let x = |i: &usize| points[*i][0];
+    members
         .iter()
-        .filter(|r| r.2 >= SLICE_POINTS && r.1 - r.0 >= SLICE_SPAN * width)
-        .map(|r| (r.0 + r.1) / 2.0)
+        .filter(|m| m.len() >= SLICE_POINTS)
+        .filter_map(|m| {
+            let lo = m.iter().copied().min_by(|a, b| x(a).total_cmp(&x(b)))?;
+            let hi = m.iter().copied().max_by(|a, b| x(a).total_cmp(&x(b)))?;
+            let (lo_x, hi_x) = (points[lo][0], points[hi][0]);
+            let middle = (lo_x + hi_x) / 2.0;
+            let far = if scanned_side > 0.0 { lo } else { hi };
+            (hi_x - lo_x >= SLICE_SPAN * width && paired(points, m, far, middle)).then_some(middle)
+        })
         .min_by(|a, b| (a * scanned_side).total_cmp(&(b * scanned_side)))
+}
+
+/// Whether the mirror image of point `far` about `x = middle` lands within [`PAIRED`] of one of
+/// the points `among`. A slice's far extreme that pairs with nothing on the scanned side, where
+/// its image would have been seen, is not the mirror of the near extreme: a part on one side
+/// only (a motorcycle's exhaust), so its slice says nothing about the plane.
+fn paired(points: &[[f64; 3]], among: &[usize], far: usize, middle: f64) -> bool {
+    let image = mirror(points[far], middle);
+    among.iter().any(|&i| {
+        let d: f64 = (0..3).map(|k| (points[i][k] - image[k]).powi(2)).sum();
+        d <= PAIRED * PAIRED
+    })
 }
 
 /// The middle of the points' x range (0 for no points).
@@ -605,6 +630,26 @@ mod tests {
             "beyond it: held back"
         );
         assert_eq!(held_back(&points, -0.01), -0.01, "short of it: kept");
+    }
+
+    #[test]
+    fn a_part_on_the_far_side_only_does_not_bound_the_plane() {
+        // The roof's slice says the plane is x = 0. Low down, the near side is 0.2 out along
+        // the front half and 0.1 along the back half, where the far side has a part of its own
+        // 0.3 out (an exhaust): its slice's middle, -0.05, would bound the plane, but its far
+        // extreme's mirror image lands where the near side is not.
+        let mut points: Vec<[f64; 3]> = Vec::new();
+        for k in 0..50 {
+            let z = k as f64 * 0.01;
+            let near = if z < 0.25 { 0.2 } else { 0.1 };
+            points.extend((0..100).map(|i| [near, i as f64 * 0.002, z]));
+            points.extend((0..=60).map(|i| [-0.15 + i as f64 * 0.005, 0.3, z]));
+            if z >= 0.4 {
+                points.extend((0..5).map(|i| [-0.3, 0.1 + i as f64 * 0.001, z]));
+            }
+        }
+        let bounds = Aabb::of(&points).unwrap();
+        assert!(slices_middle(&points, &bounds, 1.0).unwrap().abs() < 1e-9);
     }
 
     #[test]

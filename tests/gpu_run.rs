@@ -41,7 +41,8 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     );
 
     let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap())
+            .unwrap_or_else(|e| panic!("train.json: {e}\n{log}"));
     assert_eq!(summary["outcome"], "interrupted", "{summary}");
     assert!(summary["step"].as_u64().unwrap() > 0, "{summary}");
 

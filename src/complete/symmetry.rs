@@ -124,6 +124,17 @@ const SLICE_SPAN: f64 = 0.5;
 /// 0.05 and none (docs/completing.md).
 const PAIRED: f64 = 0.035;
 
+/// Two x values of a slice closer than this are one return position of the scan lines, apart
+/// only by range noise (the generated scans' noise is at most 0.002).
+const DISTINCT: f64 = 0.002;
+/// The far extreme's return spacing is believed up to this; a wider gap is more likely a gap
+/// in the surface than in the sampling.
+const MAX_SPACING: f64 = 0.015;
+/// Where the far edge is taken to lie beyond the far extreme, in return spacings: the last
+/// return falls anywhere within one spacing short of the edge, so half a spacing on average.
+/// With [`MAX_SPACING`], chosen on the validation split (docs/completing.md).
+const FAR_EDGE: f64 = 0.5;
+
 /// The slices bound the plane only when at least this share of the points lies on the better
 /// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
 /// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and
@@ -139,8 +150,11 @@ const ONE_SIDED: f64 = 0.75;
 /// whole cloud's range pairs the near flank's widest part with the far roof's edge, which is
 /// narrower, and so lies farther: on the validation split it leaned 0.8 % of the length
 /// towards the scanner (median), the slices' 0.2 %. A slice counts only where its far
-/// extreme's mirror image lands on a measured point ([`paired`]). `None` when no slice spans
-/// the width. `bounds` is the points' box.
+/// extreme's mirror image lands on a measured point ([`paired`]). The far side is seen at a
+/// grazing angle, where the returns lie far apart, so the last one falls short of the edge:
+/// the chosen slice's far extreme is moved out by [`FAR_EDGE`] of the spacing between it and
+/// the next return position. `None` when no slice spans the width. `bounds` is the points'
+/// box.
 fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<f64> {
     let width = bounds.max[0] - bounds.min[0];
     let slices = (((bounds.max[1] - bounds.min[1]) / SLICE_HEIGHT).ceil() as usize).max(1);
@@ -160,9 +174,16 @@ fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Optio
             let (lo_x, hi_x) = (points[lo][0], points[hi][0]);
             let middle = (lo_x + hi_x) / 2.0;
             let far = if scanned_side > 0.0 { lo } else { hi };
-            (hi_x - lo_x >= SLICE_SPAN * width && paired(points, m, far, middle)).then_some(middle)
+            let spacing = m
+                .iter()
+                .map(|&i| (points[i][0] - points[far][0]) * scanned_side)
+                .filter(|&d| d > DISTINCT)
+                .fold(MAX_SPACING, f64::min);
+            (hi_x - lo_x >= SLICE_SPAN * width && paired(points, m, far, middle))
+                .then_some((middle, spacing))
         })
-        .min_by(|a, b| (a * scanned_side).total_cmp(&(b * scanned_side)))
+        .min_by(|a, b| (a.0 * scanned_side).total_cmp(&(b.0 * scanned_side)))
+        .map(|(middle, spacing)| middle - scanned_side * spacing * FAR_EDGE / 2.0)
 }
 
 /// Whether the mirror image of point `far` about `x = middle` lands within [`PAIRED`] of one of
@@ -618,15 +639,17 @@ mod tests {
         // A near flank at x = 0.2 up to the shoulder, a narrower roof seen edge to edge at
         // y = 0.3: the whole x range's middle (0.025) pairs the flank with the far roof edge,
         // the roof's slice says where the plane is. The flank holds most points, as a
-        // drive-by's does.
+        // drive-by's does. The roof's returns lie 0.01 apart, so its far edge is taken half a
+        // spacing beyond the last one, and the plane half of that beyond the roof's middle.
         let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
-        section.extend((0..=60).map(|i| [-0.15 + i as f64 * 0.005, 0.3]));
+        section.extend((0..=30).map(|i| [-0.15 + i as f64 * 0.01, 0.3]));
         let points = extruded(&section);
         assert!((x_middle(&points) - 0.025).abs() < 1e-9);
         let bounds = Aabb::of(&points).unwrap();
-        assert!(slices_middle(&points, &bounds, 1.0).unwrap().abs() < 1e-9);
+        let bound = -0.01 * FAR_EDGE / 2.0;
+        assert!((slices_middle(&points, &bounds, 1.0).unwrap() - bound).abs() < 1e-9);
         assert!(
-            held_back(&points, 0.02).abs() < 1e-9,
+            (held_back(&points, 0.02) - bound).abs() < 1e-9,
             "beyond it: held back"
         );
         assert_eq!(held_back(&points, -0.01), -0.01, "short of it: kept");
@@ -634,7 +657,7 @@ mod tests {
 
     #[test]
     fn a_part_on_the_far_side_only_does_not_bound_the_plane() {
-        // The roof's slice says the plane is x = 0. Low down, the near side is 0.2 out along
+        // The roof's slice says the plane is near x = 0. Low down, the near side is 0.2 out along
         // the front half and 0.1 along the back half, where the far side has a part of its own
         // 0.3 out (an exhaust): its slice's middle, -0.05, would bound the plane, but its far
         // extreme's mirror image lands where the near side is not.
@@ -649,7 +672,8 @@ mod tests {
             }
         }
         let bounds = Aabb::of(&points).unwrap();
-        assert!(slices_middle(&points, &bounds, 1.0).unwrap().abs() < 1e-9);
+        let roof = -0.005 * FAR_EDGE / 2.0;
+        assert!((slices_middle(&points, &bounds, 1.0).unwrap() - roof).abs() < 1e-9);
     }
 
     #[test]

@@ -165,25 +165,25 @@ fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Optio
         members[slice_of(p)].push(i);
     }
     let x = |i: &usize| points[*i][0];
-    members
+    let (middle, slice, far) = members
         .iter()
         .filter(|m| m.len() >= SLICE_POINTS)
         .filter_map(|m| {
             let lo = m.iter().copied().min_by(|a, b| x(a).total_cmp(&x(b)))?;
             let hi = m.iter().copied().max_by(|a, b| x(a).total_cmp(&x(b)))?;
-            let (lo_x, hi_x) = (points[lo][0], points[hi][0]);
-            let middle = (lo_x + hi_x) / 2.0;
+            let middle = (x(&lo) + x(&hi)) / 2.0;
             let far = if scanned_side > 0.0 { lo } else { hi };
-            let spacing = m
-                .iter()
-                .map(|&i| (points[i][0] - points[far][0]) * scanned_side)
-                .filter(|&d| d > DISTINCT)
-                .fold(MAX_SPACING, f64::min);
-            (hi_x - lo_x >= SLICE_SPAN * width && paired(points, m, far, middle))
-                .then_some((middle, spacing))
+            (x(&hi) - x(&lo) >= SLICE_SPAN * width && paired(points, m, far, middle))
+                .then_some((middle, m, far))
         })
-        .min_by(|a, b| (a.0 * scanned_side).total_cmp(&(b.0 * scanned_side)))
-        .map(|(middle, spacing)| middle - scanned_side * spacing * FAR_EDGE / 2.0)
+        .min_by(|a, b| (a.0 * scanned_side).total_cmp(&(b.0 * scanned_side)))?;
+    // The spacing between the far extreme and the next return position towards the near side.
+    let spacing = slice
+        .iter()
+        .map(|i| (x(i) - x(&far)) * scanned_side)
+        .filter(|&d| d > DISTINCT)
+        .fold(MAX_SPACING, f64::min);
+    Some(middle - scanned_side * spacing * FAR_EDGE / 2.0)
 }
 
 /// Whether the mirror image of point `far` about `x = middle` lands within [`PAIRED`] of one of

@@ -212,27 +212,41 @@ const FOOTPRINT_SAMPLE: usize = 6000;
 /// Share of the footprint cut off at each end of each side, so stray points do not widen it.
 const TRIM: f64 = 0.01;
 
-/// Heading of the length axis (one of its two ends) from the smallest rectangle around the
-/// ground footprint; `None` for fewer than three points.
+/// Heading of the length axis (one of its two ends) from the ground footprint; `None` for
+/// fewer than three points. The smallest rectangle around the footprint, unless few points
+/// lie on its long sides and another axis puts most of them on one long, straight flank: a
+/// scan that sees one flank and, sparsely, an end is a thin L, whose smallest rectangle lies
+/// diagonally across it (10–18° off on validation camera partials seen from the side).
 pub fn footprint_axis(points: &[[f64; 3]]) -> Option<f64> {
     if points.len() < 3 {
         return None;
     }
     let stride = points.len().div_ceil(FOOTPRINT_SAMPLE);
-    let footprint: Vec<(f64, f64)> = points
-        .iter()
-        .step_by(stride)
-        .map(|p| (p[0], p[2]))
-        .collect();
-    let mut along = Vec::with_capacity(footprint.len());
-    let mut across = Vec::with_capacity(footprint.len());
+    let sample: Vec<[f64; 3]> = points.iter().step_by(stride).copied().collect();
+    let rectangle = smallest_rectangle_axis(&sample);
+    if flank_share(&sample, rectangle) >= FLAT_FLANKS {
+        return Some(rectangle);
+    }
+    let (flank, share) = flank_axis(&sample);
+    let (length, (lo, hi)) = extents(&sample, flank);
+    Some(if share >= FLANK_AXIS && length >= hi - lo {
+        flank_line(&sample, flank)
+    } else {
+        rectangle
+    })
+}
+
+/// Heading of the longer side of the smallest rectangle around `points`' footprint.
+fn smallest_rectangle_axis(points: &[[f64; 3]]) -> f64 {
+    let mut along = Vec::with_capacity(points.len());
+    let mut across = Vec::with_capacity(points.len());
     let mut sides = |angle: f64| {
         let (s, c) = angle.to_radians().sin_cos();
         along.clear();
         across.clear();
-        for &(x, z) in &footprint {
-            along.push(x * c + z * s);
-            across.push(-x * s + z * c);
+        for p in points {
+            along.push(p[0] * c + p[2] * s);
+            across.push(-p[0] * s + p[2] * c);
         }
         (trimmed_span(&mut along), trimmed_span(&mut across))
     };
@@ -260,7 +274,31 @@ pub fn footprint_axis(points: &[[f64; 3]]) -> Option<f64> {
         best.0 + 90.0
     };
     let (s, c) = angle.to_radians().sin_cos();
-    Some(heading_of(c, s))
+    heading_of(c, s)
+}
+
+/// Share of the points a flank must hold for [`footprint_axis`] to take its axis over the
+/// smallest rectangle's (chosen on the validation split, docs/orientation.md).
+const FLANK_AXIS: f64 = 0.4;
+
+/// The heading (one of the axis's two) with the largest [`flank_share`], searched at 1° then
+/// 0.1°, and that share.
+fn flank_axis(points: &[[f64; 3]]) -> (f64, f64) {
+    let best_of = |headings: &mut dyn Iterator<Item = f64>| {
+        headings
+            .map(|h| (h, flank_share(points, h)))
+            .fold(
+                (0.0, f64::MIN),
+                |best, at| if at.1 > best.1 { at } else { best },
+            )
+    };
+    let coarse = best_of(&mut (0..180).map(f64::from));
+    let fine = best_of(&mut (-10..=10).map(|i| coarse.0 + f64::from(i) * 0.1));
+    if fine.1 > coarse.1 {
+        fine
+    } else {
+        coarse
+    }
 }
 
 /// Length of the middle `1 − 2·TRIM` of `values` (reordered in place).
@@ -289,19 +327,54 @@ const FLAT_FLANKS: f64 = 0.3;
 /// Share of `points` (upright) within 1 % of the length from either long side of the footprint
 /// along `heading` (sides trimmed like [`footprint_axis`]'s).
 fn flank_share(points: &[[f64; 3]], heading: f64) -> f64 {
-    let (s, c) = heading.to_radians().sin_cos();
-    let mut across: Vec<f64> = points.iter().map(|p| p[0] * s + p[2] * c).collect();
-    let mut along: Vec<f64> = points.iter().map(|p| p[0] * c - p[2] * s).collect();
-    if across.len() < 3 {
+    if points.len() < 3 {
         return 0.0;
     }
-    let band = 0.01 * trimmed_span(&mut along);
-    let (lo, hi) = trimmed_range(&mut across);
-    let on_sides = across
+    let (length, (lo, hi)) = extents(points, heading);
+    let band = 0.01 * length;
+    let (s, c) = heading.to_radians().sin_cos();
+    let on_sides = points
         .iter()
-        .filter(|&&u| (u - lo).abs() < band || (u - hi).abs() < band)
+        .map(|p| p[0] * s + p[2] * c)
+        .filter(|&u| (u - lo).abs() < band || (u - hi).abs() < band)
         .count();
-    on_sides as f64 / across.len() as f64
+    on_sides as f64 / points.len() as f64
+}
+
+/// The direction of the points on the fuller long side of the footprint along `heading` (within
+/// 1 % of the length of it), as the heading nearest `heading`: a straight flank pins the axis
+/// more finely than the share's plateau, which is as wide as the band.
+fn flank_line(points: &[[f64; 3]], heading: f64) -> f64 {
+    let (length, (lo, hi)) = extents(points, heading);
+    let band = 0.01 * length;
+    let (s, c) = heading.to_radians().sin_cos();
+    let near = |side: f64| move |p: &&[f64; 3]| (p[0] * s + p[2] * c - side).abs() < band;
+    let side = if points.iter().filter(near(lo)).count() >= points.iter().filter(near(hi)).count() {
+        lo
+    } else {
+        hi
+    };
+    let flank: Vec<&[f64; 3]> = points.iter().filter(near(side)).collect();
+    let n = flank.len() as f64;
+    let (mx, mz) = flank
+        .iter()
+        .fold((0.0, 0.0), |(x, z), p| (x + p[0] / n, z + p[2] / n));
+    let (sxx, sxz, szz) = flank.iter().fold((0.0, 0.0, 0.0), |(xx, xz, zz), p| {
+        let (dx, dz) = (p[0] - mx, p[2] - mz);
+        (xx + dx * dx, xz + dx * dz, zz + dz * dz)
+    });
+    // The principal axis of the flank's footprint.
+    let angle = 0.5 * (2.0 * sxz).atan2(sxx - szz);
+    toward(heading_of(angle.cos(), angle.sin()), heading)
+}
+
+/// The trimmed length of `points` (at least three, upright) along `heading` and their trimmed
+/// range across it.
+fn extents(points: &[[f64; 3]], heading: f64) -> (f64, (f64, f64)) {
+    let (s, c) = heading.to_radians().sin_cos();
+    let mut along: Vec<f64> = points.iter().map(|p| p[0] * c - p[2] * s).collect();
+    let mut across: Vec<f64> = points.iter().map(|p| p[0] * s + p[2] * c).collect();
+    (trimmed_span(&mut along), trimmed_range(&mut across))
 }
 
 /// Points above this share of the height count as the vehicle's top.
@@ -357,8 +430,12 @@ pub(crate) mod tests {
                 }
             }
         }
-        // Canonical heading is 90°: turn by heading − 90° counter-clockwise seen from above,
-        // i.e. about +y by that angle.
+        turned(canonical, heading, offset)
+    }
+
+    /// Points of a canonical object (heading 90°) turned to `heading` and moved by `offset`.
+    fn turned(canonical: Vec<[f64; 3]>, heading: f64, offset: [f64; 3]) -> Vec<[f64; 3]> {
+        // Turn by heading − 90° counter-clockwise seen from above, i.e. about +y by that angle.
         let (s, c) = (heading - 90.0).to_radians().sin_cos();
         canonical
             .into_iter()
@@ -410,6 +487,30 @@ pub(crate) mod tests {
                 angle_between(found, heading) < 0.5,
                 "found {found} for heading {heading}"
             );
+        }
+    }
+
+    #[test]
+    fn a_flank_seen_with_a_sparse_end_keeps_the_flank_axis() {
+        // One flank seen from the side at mid-height (4 m long, 1.5 m high, densely sampled)
+        // and the end beside it at a grazing angle: 40 points across the 1.6 m width.
+        let mut canonical = Vec::new();
+        for i in 0..=200 {
+            for k in 0..=15 {
+                canonical.push([-0.8, 0.1 * k as f64, -2.0 + 0.02 * i as f64]);
+            }
+        }
+        for j in 0..40 {
+            canonical.push([-0.8 + 0.04 * j as f64, 0.5, 2.0]);
+        }
+        for heading in [90.0, 23.0, 161.5] {
+            let points = turned(canonical.clone(), heading, [3.0, 0.0, -1.0]);
+            let off =
+                |axis: f64| angle_between(axis, heading).min(angle_between(axis + 180.0, heading));
+            // The smallest rectangle lies across the thin L.
+            assert!(off(smallest_rectangle_axis(&points)) > 3.0);
+            let axis = footprint_axis(&points).unwrap();
+            assert!(off(axis) < 0.2, "axis {axis} for heading {heading}");
         }
     }
 

@@ -204,6 +204,7 @@ struct OrientationReport {
     heading: Option<f64>,
     method: &'static str,
     refinement: Option<f64>,
+    refined_by: Option<&'static str>,
 }
 
 /// Completes one file; the report of what happened.
@@ -297,6 +298,7 @@ fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timing
             heading: run.orientation.heading,
             method: run.orientation.method,
             refinement: run.orientation.refinement,
+            refined_by: run.orientation.refined_by,
         },
         cleaned: run.cleaned.map(|(_, report)| report),
         warnings: done.warnings,

@@ -83,10 +83,13 @@ pub struct Orientation {
     /// `None` for `--orient none`: the frame keeps the input's axes.
     pub heading: Option<f64>,
     pub method: &'static str,
-    /// Degrees the symmetry plane turned the estimator's heading (see [`refine_heading`]);
-    /// `None` when the heading was given, the cloud showed no symmetry near it, or its flat
-    /// flanks kept the footprint axis (see `FLAT_FLANKS`).
+    /// Degrees the refinement turned the estimator's heading; `None` when the heading was
+    /// given, neither the wheels nor the symmetry said anything near it, or its flat flanks
+    /// kept the footprint axis (see `FLAT_FLANKS`).
     pub refinement: Option<f64>,
+    /// What turned it: `"wheels"` (their ground line, see [`wheel_line`]) or `"symmetry"` (the
+    /// plane of symmetry, see [`refine_heading`]).
+    pub refined_by: Option<&'static str>,
 }
 
 /// Finds the heading of `cloud` (up axis `up`). `orienter` is needed by the modes that
@@ -102,6 +105,7 @@ pub fn orient(
         heading,
         method,
         refinement: None,
+        refined_by: None,
     };
     match mode.resolved() {
         OrientMode::None => fixed(None, "none"),
@@ -118,12 +122,17 @@ pub fn orient(
             let refined = if from_footprint && flank_share(&points, estimate) >= FLAT_FLANKS {
                 None
             } else {
-                refine_heading(&points, estimate)
+                wheel_line(&points)
+                    .map(|line| toward(line, estimate))
+                    .filter(|&line| angle_between(line, estimate) <= MAX_WHEEL_TURN)
+                    .map(|line| (line, "wheels"))
+                    .or_else(|| refine_heading(&points, estimate).map(|h| (h, "symmetry")))
             };
             Orientation {
-                heading: Some(refined.unwrap_or(estimate)),
+                heading: Some(refined.map_or(estimate, |r| r.0)),
                 method,
-                refinement: refined.map(|r| signed_turn(estimate, r)),
+                refinement: refined.map(|r| signed_turn(estimate, r.0)),
+                refined_by: refined.map(|r| r.1),
             }
         }
     }
@@ -377,6 +386,58 @@ fn extents(points: &[[f64; 3]], heading: f64) -> (f64, (f64, f64)) {
     (trimmed_span(&mut along), trimmed_range(&mut across))
 }
 
+/// Points below this share of the height are where the wheels meet the ground. Chosen on the
+/// validation split among 0.03, 0.05 and 0.1 (docs/orientation.md).
+const GROUND: f64 = 0.05;
+/// The ground points must span at least this share of the footprint's length along their line,
+/// so that both ends' wheels are in it.
+const WHEELBASE: f64 = 0.5;
+/// ... and lie this thin across it (RMS across over RMS along): a line, not a patch. On the
+/// validation split 0.1, 0.2 and 0.3 score alike (docs/orientation.md); at 0.2 a few low
+/// returns from the far wheels of a real scan (CAR164) turned its line 3° off its flank.
+const WHEEL_LINE_WIDTH: f64 = 0.1;
+/// The wheels' line turns an estimate by at most this many degrees; more is another line.
+const MAX_WHEEL_TURN: f64 = 20.0;
+
+/// Heading of the line (one of its two ends) the lowest points of `points` (upright) lie on,
+/// where they lie on one: the wheels' ground contact, front and back, which lies in the plane
+/// of symmetry of a motorcycle and along the seen flank of a car. `None` when the ground
+/// points are few, short of the footprint's length or not thin across.
+fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
+    let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        (lo.min(p[1]), hi.max(p[1]))
+    });
+    let ground = lo + GROUND * (hi - lo);
+    let low: Vec<&[f64; 3]> = points.iter().filter(|p| p[1] <= ground).collect();
+    if low.len() < 10 {
+        return None;
+    }
+    let n = low.len() as f64;
+    let (mx, mz) = low
+        .iter()
+        .fold((0.0, 0.0), |(x, z), p| (x + p[0] / n, z + p[2] / n));
+    let (sxx, sxz, szz) = low.iter().fold((0.0, 0.0, 0.0), |(xx, xz, zz), p| {
+        let (dx, dz) = (p[0] - mx, p[2] - mz);
+        (xx + dx * dx / n, xz + dx * dz / n, zz + dz * dz / n)
+    });
+    let angle = 0.5 * (2.0 * sxz).atan2(sxx - szz);
+    let heading = heading_of(angle.cos(), angle.sin());
+    // The spreads along and across the line: the covariance's eigenvalues.
+    let mean = (sxx + szz) / 2.0;
+    let half = ((sxx - szz) * (sxx - szz) / 4.0 + sxz * sxz).sqrt();
+    let (along, across) = (mean + half, (mean - half).max(0.0));
+    let span = |pts: &mut dyn Iterator<Item = &[f64; 3]>| {
+        let (s, c) = heading.to_radians().sin_cos();
+        let (a, b) = pts
+            .map(|p| p[0] * c - p[2] * s)
+            .fold((f64::MAX, f64::MIN), |(a, b), u| (a.min(u), b.max(u)));
+        b - a
+    };
+    let long = span(&mut low.iter().copied()) >= WHEELBASE * span(&mut points.iter());
+    let thin = across.sqrt() <= WHEEL_LINE_WIDTH * along.sqrt();
+    (long && thin).then_some(heading)
+}
+
 /// Points above this share of the height count as the vehicle's top.
 const TOP: f64 = 0.75;
 
@@ -411,6 +472,10 @@ pub fn geometric(points: &[[f64; 3]]) -> Option<f64> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::core::rng::Lcg;
+    use crate::datagen::mesh::SignedAxis;
+    use crate::datagen::scan::{scan, PartialSpec};
+    use crate::datagen::synth::{synthesize, Category};
 
     /// A car-like block in upright coordinates with its front at heading `heading`: a long low
     /// body with a tall cabin over its rear half, at arbitrary offsets.
@@ -515,6 +580,36 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_motorcycle_is_turned_onto_its_wheels_line() {
+        // Generated motorcycles, driven past (their length along z, heading 90° or 270°): the
+        // tyres' lowest returns lie on the plane of symmetry.
+        for (seed, side) in [(1, 1.0), (2, -1.0), (3, 1.0)] {
+            let mut mesh = synthesize(0, seed, &[Category::Motorcycle]).mesh;
+            mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
+                .unwrap();
+            let spec = PartialSpec::Scanner {
+                side,
+                distance: 0.8,
+                height: 0.6,
+                yaw_deg: 0.0,
+                line_spacing: 0.006,
+                angle_step_deg: 0.2,
+                noise: 0.001,
+            };
+            let part = scan(&mesh, &spec, &mut Lcg::new(seed));
+            let cloud =
+                PointCloud::from_positions(part.points.iter().map(|p| p.map(f64::from)).collect());
+            let found = orient(&cloud, UpAxis::Y, OrientMode::Geometric, None);
+            assert_eq!(found.refined_by, Some("wheels"), "{found:?}");
+            let heading = found.heading.unwrap();
+            let off = angle_between(heading, 90.0).min(angle_between(heading, 270.0));
+            assert!(off < 0.1, "motorcycle {seed}: heading {heading}");
+        }
+        // A round lump has no wheels' line.
+        assert_eq!(wheel_line(&ellipsoid()), None);
+    }
+
+    #[test]
     fn the_reported_method_is_the_estimator_that_ran() {
         let cloud = PointCloud::from_positions(car_block(37.0, [0.0; 3]));
         // No orientation network: the learned and combined modes fall back to the footprint.
@@ -545,22 +640,27 @@ pub(crate) mod tests {
         let found = orient(&cloud, UpAxis::Y, OrientMode::Geometric, None);
         assert_eq!(found.refinement, None);
         // An ellipsoid (a round, motorcycle-like footprint) has no flat flank.
-        let mut ellipsoid = Vec::new();
+        let share = flank_share(&ellipsoid(), 90.0);
+        assert!(share < FLAT_FLANKS / 3.0, "ellipsoid: {share}");
+    }
+
+    /// An ellipsoid 0.8 wide, 1 high and 2 long (along z), without its poles.
+    fn ellipsoid() -> Vec<[f64; 3]> {
+        let mut points = Vec::new();
         for i in 0..60 {
             for j in 1..30 {
                 let (a, b) = (
                     i as f64 * 6.0_f64.to_radians(),
                     j as f64 * 6.0_f64.to_radians(),
                 );
-                ellipsoid.push([
+                points.push([
                     0.4 * b.sin() * a.cos(),
                     0.5 * b.cos(),
                     1.0 * b.sin() * a.sin(),
                 ]);
             }
         }
-        let share = flank_share(&ellipsoid, 90.0);
-        assert!(share < FLAT_FLANKS / 3.0, "ellipsoid: {share}");
+        points
     }
 
     #[test]

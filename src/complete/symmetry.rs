@@ -589,7 +589,7 @@ impl MatchGrid {
 mod tests {
     use super::*;
     use crate::complete::orient::angle_between;
-    use crate::complete::orient::tests::car_block;
+    use crate::complete::orient::tests::{car_block, driven_past};
     use crate::core::rng::Lcg;
     use crate::datagen::mesh::SignedAxis;
     use crate::datagen::scan::{scan, PartialSpec};
@@ -634,21 +634,7 @@ mod tests {
     /// `side` (sensor 0.45 above the object's lowest point, 0.8 beside its centre); the
     /// object's own plane is x = 0.
     fn drive_by_plane(category: Category, seed: u64, side: f32) -> Option<Plane> {
-        let mut mesh = synthesize(0, seed, &[category]).mesh;
-        mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
-            .unwrap();
-        let spec = PartialSpec::Scanner {
-            side,
-            distance: 0.8,
-            height: 0.45,
-            yaw_deg: 0.0,
-            line_spacing: 0.008,
-            angle_step_deg: 0.25,
-            noise: 0.001,
-        };
-        let part = scan(&mesh, &spec, &mut Lcg::new(seed));
-        let points: Vec<[f64; 3]> = part.points.iter().map(|p| p.map(f64::from)).collect();
-        find_plane(&points)
+        find_plane(&driven_past(category, seed, side, 0.45))
     }
 
     /// A cross-section's (x, y) points repeated along the length, 50 times 0.01 apart.

@@ -87,8 +87,8 @@ pub struct Orientation {
     /// given, neither the wheels nor the symmetry said anything near it, or its flat flanks
     /// kept the footprint axis (see `FLAT_FLANKS`).
     pub refinement: Option<f64>,
-    /// What turned it: `"wheels"` (their ground line, see [`wheel_line`]) or `"symmetry"` (the
-    /// plane of symmetry, see [`refine_heading`]).
+    /// What turned it: `"wheels"` (the line the lowest points lie on, the wheels' ground contact)
+    /// or `"symmetry"` (the plane of symmetry, see [`refine_heading`]).
     pub refined_by: Option<&'static str>,
 }
 
@@ -364,17 +364,29 @@ fn flank_line(points: &[[f64; 3]], heading: f64) -> f64 {
         hi
     };
     let flank: Vec<&[f64; 3]> = points.iter().filter(near(side)).collect();
-    let n = flank.len() as f64;
-    let (mx, mz) = flank
+    toward(principal_axis(&flank).0, heading)
+}
+
+/// The principal direction of `points`' footprint (upright, at least one) as a heading, and
+/// the RMS spreads of the points along and across it.
+fn principal_axis(points: &[&[f64; 3]]) -> (f64, f64, f64) {
+    let n = points.len() as f64;
+    let (mx, mz) = points
         .iter()
         .fold((0.0, 0.0), |(x, z), p| (x + p[0] / n, z + p[2] / n));
-    let (sxx, sxz, szz) = flank.iter().fold((0.0, 0.0, 0.0), |(xx, xz, zz), p| {
+    let (sxx, sxz, szz) = points.iter().fold((0.0, 0.0, 0.0), |(xx, xz, zz), p| {
         let (dx, dz) = (p[0] - mx, p[2] - mz);
-        (xx + dx * dx, xz + dx * dz, zz + dz * dz)
+        (xx + dx * dx / n, xz + dx * dz / n, zz + dz * dz / n)
     });
-    // The principal axis of the flank's footprint.
     let angle = 0.5 * (2.0 * sxz).atan2(sxx - szz);
-    toward(heading_of(angle.cos(), angle.sin()), heading)
+    // The covariance's eigenvalues.
+    let mean = (sxx + szz) / 2.0;
+    let half = ((sxx - szz) * (sxx - szz) / 4.0 + sxz * sxz).sqrt();
+    (
+        heading_of(angle.cos(), angle.sin()),
+        (mean + half).sqrt(),
+        (mean - half).max(0.0).sqrt(),
+    )
 }
 
 /// The trimmed length of `points` (at least three, upright) along `heading` and their trimmed
@@ -412,20 +424,7 @@ fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
     if low.len() < 10 {
         return None;
     }
-    let n = low.len() as f64;
-    let (mx, mz) = low
-        .iter()
-        .fold((0.0, 0.0), |(x, z), p| (x + p[0] / n, z + p[2] / n));
-    let (sxx, sxz, szz) = low.iter().fold((0.0, 0.0, 0.0), |(xx, xz, zz), p| {
-        let (dx, dz) = (p[0] - mx, p[2] - mz);
-        (xx + dx * dx / n, xz + dx * dz / n, zz + dz * dz / n)
-    });
-    let angle = 0.5 * (2.0 * sxz).atan2(sxx - szz);
-    let heading = heading_of(angle.cos(), angle.sin());
-    // The spreads along and across the line: the covariance's eigenvalues.
-    let mean = (sxx + szz) / 2.0;
-    let half = ((sxx - szz) * (sxx - szz) / 4.0 + sxz * sxz).sqrt();
-    let (along, across) = (mean + half, (mean - half).max(0.0));
+    let (heading, along, across) = principal_axis(&low);
     let span = |pts: &mut dyn Iterator<Item = &[f64; 3]>| {
         let (s, c) = heading.to_radians().sin_cos();
         let (a, b) = pts
@@ -434,7 +433,7 @@ fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
         b - a
     };
     let long = span(&mut low.iter().copied()) >= WHEELBASE * span(&mut points.iter());
-    let thin = across.sqrt() <= WHEEL_LINE_WIDTH * along.sqrt();
+    let thin = across <= WHEEL_LINE_WIDTH * along;
     (long && thin).then_some(heading)
 }
 
@@ -496,6 +495,31 @@ pub(crate) mod tests {
             }
         }
         turned(canonical, heading, offset)
+    }
+
+    /// A drive-by scan of generated object `seed` of `category` (normalized: length along z, up
+    /// y, its plane of symmetry x = 0) from `side`, the sensor `height` above the object's
+    /// lowest point and 0.8 beside its centre.
+    pub(crate) fn driven_past(
+        category: Category,
+        seed: u64,
+        side: f32,
+        height: f32,
+    ) -> Vec<[f64; 3]> {
+        let mut mesh = synthesize(0, seed, &[category]).mesh;
+        mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
+            .unwrap();
+        let spec = PartialSpec::Scanner {
+            side,
+            distance: 0.8,
+            height,
+            yaw_deg: 0.0,
+            line_spacing: 0.008,
+            angle_step_deg: 0.25,
+            noise: 0.001,
+        };
+        let part = scan(&mesh, &spec, &mut Lcg::new(seed));
+        part.points.iter().map(|p| p.map(f64::from)).collect()
     }
 
     /// Points of a canonical object (heading 90°) turned to `heading` and moved by `offset`.
@@ -584,21 +608,8 @@ pub(crate) mod tests {
         // Generated motorcycles, driven past (their length along z, heading 90° or 270°): the
         // tyres' lowest returns lie on the plane of symmetry.
         for (seed, side) in [(1, 1.0), (2, -1.0), (3, 1.0)] {
-            let mut mesh = synthesize(0, seed, &[Category::Motorcycle]).mesh;
-            mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
-                .unwrap();
-            let spec = PartialSpec::Scanner {
-                side,
-                distance: 0.8,
-                height: 0.6,
-                yaw_deg: 0.0,
-                line_spacing: 0.006,
-                angle_step_deg: 0.2,
-                noise: 0.001,
-            };
-            let part = scan(&mesh, &spec, &mut Lcg::new(seed));
             let cloud =
-                PointCloud::from_positions(part.points.iter().map(|p| p.map(f64::from)).collect());
+                PointCloud::from_positions(driven_past(Category::Motorcycle, seed, side, 0.6));
             let found = orient(&cloud, UpAxis::Y, OrientMode::Geometric, None);
             assert_eq!(found.refined_by, Some("wheels"), "{found:?}");
             let heading = found.heading.unwrap();

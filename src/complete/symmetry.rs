@@ -590,11 +590,8 @@ mod tests {
     use super::*;
     use crate::complete::orient::angle_between;
     use crate::complete::orient::tests::{car_block, driven_past};
-    use crate::core::rng::Lcg;
-    use crate::datagen::mesh::SignedAxis;
-    use crate::datagen::scan::{scan, PartialSpec};
     use crate::datagen::shapes::{example_car, scanned_side};
-    use crate::datagen::synth::{synthesize, Category};
+    use crate::datagen::synth::Category;
 
     #[test]
     fn the_plane_of_drive_by_scans_is_not_pulled_towards_the_scanned_side() {

@@ -412,8 +412,8 @@ const WHEEL_LINE_WIDTH: f64 = 0.1;
 const MAX_WHEEL_TURN: f64 = 20.0;
 
 /// Heading of the line (one of its two ends) the lowest points of `points` (upright) lie on,
-/// where they lie on one: the wheels' ground contact, front and back, which lies in the plane
-/// of symmetry of a motorcycle and along the seen flank of a car. `None` when the ground
+/// where they lie on one: the wheels' ground contact, front and back, which runs parallel to
+/// the plane of symmetry (a motorcycle's tyres, a car's near tyres on a one-sided scan). `None` when the ground
 /// points are few, short of the footprint's length or not thin across.
 fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
     let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
@@ -606,7 +606,7 @@ pub(crate) mod tests {
     #[test]
     fn a_motorcycle_is_turned_onto_its_wheels_line() {
         // Generated motorcycles, driven past (their length along z, heading 90° or 270°): the
-        // tyres' lowest returns lie on the plane of symmetry.
+        // tyres' lowest returns lie on a line parallel to the plane of symmetry.
         for (seed, side) in [(1, 1.0), (2, -1.0), (3, 1.0)] {
             let cloud =
                 PointCloud::from_positions(driven_past(Category::Motorcycle, seed, side, 0.6));

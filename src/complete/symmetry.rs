@@ -86,11 +86,12 @@ pub enum PlaneFit {
 /// to 0.699, most of it on the 27 % of partials that had no plane before. `None` only when
 /// neither support nor pairs show any symmetry (for example, one flat side).
 pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
-    let width = Aabb::of(points).map_or(0.0, |b| b.max[0] - b.min[0]);
+    let bounds = Aabb::of(points)?;
+    let width = bounds.max[0] - bounds.min[0];
     let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * width))?;
     let (best, support) = sample.best_offset([1.0, 0.0]);
     let supported = support >= MIN_SCORE;
-    let start = if supported { best } else { x_middle(points) };
+    let start = if supported { best } else { bounds.center()[0] };
     let normals = sample.normals();
     // Without the edges' pairs first; where only edges pair (a flank and a roof strip of some
     // trains), with them.
@@ -103,7 +104,7 @@ pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
         None if supported => (best, PlaneFit::Supported),
         None => return None,
     };
-    let offset = held_back(points, refined);
+    let offset = held_back(points, &bounds, refined);
     let fit = if offset == refined {
         fit
     } else {
@@ -204,19 +205,11 @@ fn paired(points: &[[f64; 3]], among: &[usize], far: usize, middle: f64) -> bool
     })
 }
 
-/// The middle of the points' x range (0 for no points).
-fn x_middle(points: &[[f64; 3]]) -> f64 {
-    Aabb::of(points).map_or(0.0, |b| b.center()[0])
-}
-
 /// The plane offset `c`, held back at the middle of the slice seen widest on both sides
 /// ([`slices_middle`]; of the points' whole x range when none is or the cloud is not seen from
 /// one side, [`ONE_SIDED`]) when it lies beyond it towards the better scanned side (see
-/// [`find_plane`]).
-fn held_back(points: &[[f64; 3]], c: f64) -> f64 {
-    let Some(bounds) = Aabb::of(points) else {
-        return c;
-    };
+/// [`find_plane`]). `bounds` is the points' box.
+fn held_back(points: &[[f64; 3]], bounds: &Aabb, c: f64) -> f64 {
     let whole = bounds.center()[0];
     let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
     // The side holding more of the points is the better scanned one.
@@ -227,7 +220,7 @@ fn held_back(points: &[[f64; 3]], c: f64) -> f64 {
         .count() as f64
         / points.len() as f64;
     let middle = if near_share >= ONE_SIDED {
-        slices_middle(points, &bounds, scanned_side).unwrap_or(whole)
+        slices_middle(points, bounds, scanned_side).unwrap_or(whole)
     } else {
         whole
     };
@@ -651,15 +644,19 @@ mod tests {
         let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
         section.extend((0..=30).map(|i| [-0.15 + i as f64 * 0.01, 0.3]));
         let points = extruded(&section);
-        assert!((x_middle(&points) - 0.025).abs() < 1e-9);
         let bounds = Aabb::of(&points).unwrap();
+        assert!((bounds.center()[0] - 0.025).abs() < 1e-9);
         let bound = -0.01 * FAR_EDGE / 2.0;
         assert!((slices_middle(&points, &bounds, 1.0).unwrap() - bound).abs() < 1e-9);
         assert!(
-            (held_back(&points, 0.02) - bound).abs() < 1e-9,
+            (held_back(&points, &bounds, 0.02) - bound).abs() < 1e-9,
             "beyond it: held back"
         );
-        assert_eq!(held_back(&points, -0.01), -0.01, "short of it: kept");
+        assert_eq!(
+            held_back(&points, &bounds, -0.01),
+            -0.01,
+            "short of it: kept"
+        );
     }
 
     #[test]
@@ -691,10 +688,10 @@ mod tests {
         section.extend((0..40).map(|i| [-0.2, i as f64 * 0.0075]));
         section.extend([[-0.3, 0.32], [0.1, 0.32]]);
         let points = extruded(&section);
-        let whole = x_middle(&points);
         let bounds = Aabb::of(&points).unwrap();
+        let whole = bounds.center()[0];
         assert!(slices_middle(&points, &bounds, 1.0).unwrap() < whole - 0.04);
-        assert_eq!(held_back(&points, 0.02), whole);
+        assert_eq!(held_back(&points, &bounds, 0.02), whole);
     }
 
     #[test]

@@ -293,16 +293,17 @@ const FLANK_AXIS: f64 = 0.4;
 /// The heading (one of the axis's two) with the largest [`flank_share`], searched at 1° then
 /// 0.1°, and that share.
 fn flank_axis(points: &[[f64; 3]]) -> (f64, f64) {
-    let best_of = |headings: &mut dyn Iterator<Item = f64>| {
+    let best_of = |headings: Vec<f64>| {
         headings
+            .into_iter()
             .map(|h| (h, flank_share(points, h)))
             .fold(
                 (0.0, f64::MIN),
                 |best, at| if at.1 > best.1 { at } else { best },
             )
     };
-    let coarse = best_of(&mut (0..180).map(f64::from));
-    let fine = best_of(&mut (-10..=10).map(|i| coarse.0 + f64::from(i) * 0.1));
+    let coarse = best_of((0..180).map(f64::from).collect());
+    let fine = best_of((-10..=10).map(|i| coarse.0 + f64::from(i) * 0.1).collect());
     if fine.1 > coarse.1 {
         fine
     } else {
@@ -425,16 +426,19 @@ fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
         return None;
     }
     let (heading, along, across) = principal_axis(&low);
-    let span = |pts: &mut dyn Iterator<Item = &[f64; 3]>| {
-        let (s, c) = heading.to_radians().sin_cos();
-        let (a, b) = pts
-            .map(|p| p[0] * c - p[2] * s)
-            .fold((f64::MAX, f64::MIN), |(a, b), u| (a.min(u), b.max(u)));
-        b - a
-    };
-    let long = span(&mut low.iter().copied()) >= WHEELBASE * span(&mut points.iter());
+    let long =
+        span_along(low.iter().copied(), heading) >= WHEELBASE * span_along(points.iter(), heading);
     let thin = across <= WHEEL_LINE_WIDTH * along;
     (long && thin).then_some(heading)
+}
+
+/// The extent of `points` (upright) along `heading`.
+fn span_along<'a>(points: impl Iterator<Item = &'a [f64; 3]>, heading: f64) -> f64 {
+    let (s, c) = heading.to_radians().sin_cos();
+    let (lo, hi) = points
+        .map(|p| p[0] * c - p[2] * s)
+        .fold((f64::MAX, f64::MIN), |(lo, hi), u| (lo.min(u), hi.max(u)));
+    hi - lo
 }
 
 /// Points above this share of the height count as the vehicle's top.

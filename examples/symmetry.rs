@@ -56,6 +56,8 @@ struct Sample {
     /// Where the estimated plane crosses the object's centre line, over its length, positive
     /// towards the scanned side (scanner partials; the cameras' side is not one side).
     towards_scanner: Option<f64>,
+    /// How the plane was found (`PlaneFit`), `None` when it was not.
+    fit: Option<String>,
     /// F1@0.01 of the partial alone, of the mirror completion and of the mirror about the
     /// true plane.
     f1_partial: f64,
@@ -97,16 +99,15 @@ fn true_mirror(measured: &[[f64; 3]], tolerance: f64) -> Vec<[f64; 3]> {
     measured.iter().copied().chain(kept).collect()
 }
 
-/// Offset, angle, the offset towards the scanner, and the F1 of the partial, the mirror and
-/// the true mirror.
-type Measured = (Option<f64>, Option<f64>, Option<f64>, f64, f64, f64);
-
+/// The plane's errors and the mirror's scores of one partial; `name` and `category` are
+/// copied into the result.
 fn measure(
     completer: &Completer,
+    (name, category): (String, String),
     partial: &Path,
     gt: &[[f64; 3]],
     spec: &PartialSpec,
-) -> Result<Measured, Error> {
+) -> Result<Sample, Error> {
     let cloud = read_cloud(partial, None)?.cloud;
     let completion = mirrored(completer, &cloud)?;
     let measured: Vec<[f64; 3]> = cloud
@@ -149,14 +150,18 @@ fn measure(
     let tolerance = completion
         .plane
         .map_or(0.0, |p| p.tolerance * completion.frame.extent);
-    Ok((
+    Ok(Sample {
+        name,
+        category,
+        kind: spec.protocol(),
         offset,
         angle,
         towards_scanner,
-        f1(&measured, gt),
-        f1(&completed, gt),
-        f1(&true_mirror(&measured, tolerance), gt),
-    ))
+        fit: completion.plane.map(|p| format!("{:?}", p.fit)),
+        f1_partial: f1(&measured, gt),
+        f1_mirror: f1(&completed, gt),
+        f1_true: f1(&true_mirror(&measured, tolerance), gt),
+    })
 }
 
 fn quantile(values: &mut [f64], q: f64) -> f64 {
@@ -320,19 +325,9 @@ fn main() -> Result<(), Error> {
             let clouds = layout.clouds(&model.split, &model.category, &model.name);
             let gt = read_cloud(&clouds.join(GT_FINE), None)?.cloud.positions;
             let partial = clouds.join(format!("partial_{}.ply", sample.k));
-            let (offset, angle, towards_scanner, f1_partial, f1_mirror, f1_true) =
-                measure(&completer, &partial, &gt, &sample.spec)?;
-            Ok(Sample {
-                name: format!("{}/{}/partial_{}", model.category, model.name, sample.k),
-                category: model.category.clone(),
-                kind: sample.spec.protocol(),
-                offset,
-                angle,
-                towards_scanner,
-                f1_partial,
-                f1_mirror,
-                f1_true,
-            })
+            let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
+            let names = (name, model.category.clone());
+            measure(&completer, names, &partial, &gt, &sample.spec)
         })
         .collect::<Result<_, Error>>()?;
 

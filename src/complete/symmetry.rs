@@ -142,15 +142,6 @@ const MAX_SPACING: f64 = 0.015;
 /// With [`MAX_SPACING`], chosen on the validation split (docs/completing.md).
 const FAR_EDGE: f64 = 0.5;
 
-/// How far along the length a near-side point may lie from the far extreme and still count
-/// as level with it ([`level_middle`]). Chosen on the validation split among 0.01, 0.02, 0.03
-/// and 0.04 (docs/completing.md).
-const LEVEL: f64 = 0.02;
-/// Most the level pair moves a slice's middle away from the scanned side: a near point level
-/// with the far extreme may lie inside the outline (a wheel arch, an end face seen in part).
-/// Chosen among 0.003, 0.005, 0.008, 0.01 and none.
-const MAX_LEVEL_SHIFT: f64 = 0.01;
-
 /// The slices bound the plane only when at least this share of the points lies on the better
 /// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
 /// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and
@@ -166,9 +157,8 @@ const ONE_SIDED: f64 = 0.75;
 /// whole cloud's range pairs the near flank's widest part with the far roof's edge, which is
 /// narrower, and so lies farther: on the validation split it leaned 0.8 % of the length
 /// towards the scanner (median), the slices' 0.2 %. A slice counts only where its far
-/// extreme's mirror image lands on a measured point ([`paired`]), and the chosen slice's
-/// middle is taken against the near side level with the far extreme ([`level_middle`]). The
-/// far side is seen at a grazing angle, where the returns lie far apart, so the last one falls short of the edge:
+/// extreme's mirror image lands on a measured point ([`paired`]). The far side is seen at a
+/// grazing angle, where the returns lie far apart, so the last one falls short of the edge:
 /// the chosen slice's far extreme is moved out by [`FAR_EDGE`] of the spacing between it and
 /// the next return position. `None` when no slice spans the width. `bounds` is the points'
 /// box.
@@ -194,7 +184,6 @@ fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Optio
                 .then_some((middle, m, far))
         })
         .min_by(|a, b| (a.0 * scanned_side).total_cmp(&(b.0 * scanned_side)))?;
-    let middle = level_middle(points, slice, far, middle, scanned_side);
     // The spacing between the far extreme and the next return position towards the near side.
     let spacing = slice
         .iter()
@@ -202,34 +191,6 @@ fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Optio
         .filter(|&d| d > DISTINCT)
         .fold(MAX_SPACING, f64::min);
     Some(middle - scanned_side * spacing * FAR_EDGE / 2.0)
-}
-
-/// The middle between the far extreme `far` and the near side's outermost point level with it
-/// along the length (within [`LEVEL`]), of the points `slice`, moved from the slice's `middle`
-/// by at most [`MAX_LEVEL_SHIFT`] and only away from the scanned side. The slice's near extreme is the vehicle's widest part at
-/// that height, and the far extreme is often a rounded end's corner, narrower than that: a
-/// drive-by sees the far corners of the ends from the path beyond them. The near side level
-/// with the corner is its mirror image, so their middle lies on the plane, where the whole
-/// slice's middle leans towards the scanner by half the difference of the two widths.
-fn level_middle(
-    points: &[[f64; 3]],
-    slice: &[usize],
-    far: usize,
-    middle: f64,
-    scanned_side: f64,
-) -> f64 {
-    let near = slice
-        .iter()
-        .filter(|&&i| (points[i][2] - points[far][2]).abs() <= LEVEL)
-        .map(|&i| points[i][0] * scanned_side)
-        .fold(f64::NEG_INFINITY, f64::max);
-    // Nothing of the near side level with the far extreme (a door mirror seen on the far side
-    // only, its near twin in the next slice): no pair to go by.
-    if near <= middle * scanned_side {
-        return middle;
-    }
-    let level = (points[far][0] + near * scanned_side) / 2.0;
-    middle - scanned_side * ((middle - level) * scanned_side).clamp(0.0, MAX_LEVEL_SHIFT)
 }
 
 /// Whether the mirror image of point `far` about `x = middle` lands within [`PAIRED`] of one of
@@ -671,38 +632,6 @@ mod tests {
         (0..50)
             .flat_map(|k| section.iter().map(move |&[x, y]| [x, y, k as f64 * 0.01]))
             .collect()
-    }
-
-    /// One slice from above: the near flank at x = `flank` from z = 0 to 0.4, a rounded end
-    /// whose near corner is at x = `corner`, z = 0.45, and the far corner, the slice's far
-    /// extreme, at −`corner` and z = `far_z`. Returns the slice's points and its far extreme.
-    fn rounded_end(flank: f64, corner: f64, far_z: f64) -> (Vec<[f64; 3]>, usize) {
-        let mut points: Vec<[f64; 3]> = (0..=40).map(|k| [flank, 0.0, k as f64 * 0.01]).collect();
-        points.push([corner, 0.0, 0.45]);
-        points.push([-corner, 0.0, far_z]);
-        let far = points.len() - 1;
-        (points, far)
-    }
-
-    #[test]
-    fn the_far_corner_of_an_end_is_paired_with_the_near_corner_level_with_it() {
-        let (points, far) = rounded_end(0.2, 0.19, 0.45);
-        let slice: Vec<usize> = (0..points.len()).collect();
-        let middle = (0.2 - 0.19) / 2.0;
-        assert!(level_middle(&points, &slice, far, middle, 1.0).abs() < 1e-12);
-        let (wide, far) = rounded_end(0.2, 0.15, 0.45);
-        assert!(
-            (level_middle(&wide, &slice, far, 0.025, 1.0) - (0.025 - MAX_LEVEL_SHIFT)).abs()
-                < 1e-12,
-            "moved by at most MAX_LEVEL_SHIFT"
-        );
-        let (alone, far) = rounded_end(0.2, 0.19, 0.5);
-        let without_corner: Vec<usize> = (0..alone.len()).filter(|&i| i != 41).collect();
-        assert_eq!(
-            level_middle(&alone, &without_corner, far, middle, 1.0),
-            middle,
-            "nothing of the near side level with it: kept"
-        );
     }
 
     #[test]

@@ -2,8 +2,8 @@
 //! partial of a `prepare` data directory is completed with `--method mirror` (everything
 //! estimated, as `mvpcc complete --method mirror` does), the estimated plane is compared with
 //! the true one (the generated objects are symmetric about x = 0 of their own frame), and the
-//! mirror completion is scored next to the mirror about the true plane, by partial kind and
-//! category.
+//! mirror completion is scored next to the mirror about the true plane, by partial kind,
+//! category and how the plane was found (`fit`).
 //!
 //! Real scans given with `--mls DIR` (PCD, y up) are completed the same way, as they are and
 //! turned by five random headings: the plane's fit, the far side's measured extent against
@@ -14,8 +14,9 @@
 //! `cargo run --release --example symmetry -- --data DATA [--limit N] [--json FILE]
 //! [--mls DIR] [--seed N]`
 //!
-//! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset);
-//! the test split is measured once, for the report.
+//! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset;
+//! small gains are checked on three more seeds, docs/completing.md); the test split is measured
+//! once, for the report.
 
 use burn::tensor::Device;
 use mvpcc::complete::orient::OrientMode;
@@ -336,6 +337,7 @@ fn main() -> Result<(), Error> {
         for key in [
             format!("kind {}", s.kind),
             format!("category {}", s.category),
+            format!("fit {}", s.fit.as_deref().unwrap_or("none")),
             "all".into(),
         ] {
             groups.entry(key).or_default().push(s);

@@ -414,13 +414,10 @@ const MAX_WHEEL_TURN: f64 = 20.0;
 
 /// Heading of the line (one of its two ends) the lowest points of `points` (upright) lie on,
 /// where they lie on one: the wheels' ground contact, front and back, which runs parallel to
-/// the plane of symmetry (a motorcycle's tyres, a car's near tyres on a one-sided scan). `None` when the ground
-/// points are few, short of the footprint's length or not thin across.
+/// the plane of symmetry (a motorcycle's tyres, a car's near tyres on a one-sided scan).
+/// `None` when the ground points are few, short of the footprint's length or not thin across.
 fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
-    let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-        (lo.min(p[1]), hi.max(p[1]))
-    });
-    let ground = lo + GROUND * (hi - lo);
+    let ground = at_height(points, GROUND);
     let low: Vec<&[f64; 3]> = points.iter().filter(|p| p[1] <= ground).collect();
     if low.len() < 10 {
         return None;
@@ -441,6 +438,14 @@ fn span_along<'a>(points: impl Iterator<Item = &'a [f64; 3]>, heading: f64) -> f
     hi - lo
 }
 
+/// The height `share` of the way from the lowest of `points` (upright) to the highest.
+fn at_height(points: &[[f64; 3]], share: f64) -> f64 {
+    let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        (lo.min(p[1]), hi.max(p[1]))
+    });
+    lo + share * (hi - lo)
+}
+
 /// Points above this share of the height count as the vehicle's top.
 const TOP: f64 = 0.75;
 
@@ -449,10 +454,7 @@ const TOP: f64 = 0.75;
 pub fn geometric(points: &[[f64; 3]]) -> Option<f64> {
     let axis = footprint_axis(points)?;
     let (dx, dz) = direction(axis);
-    let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-        (lo.min(p[1]), hi.max(p[1]))
-    });
-    let threshold = lo + TOP * (hi - lo);
+    let threshold = at_height(points, TOP);
     let along: Vec<f64> = points.iter().map(|p| p[0] * dx + p[2] * dz).collect();
     let (a_lo, a_hi) = along
         .iter()

@@ -4,7 +4,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::core::camera::{Camera, DEFAULT_VIEWS};
 use mvpcc::core::rng::Lcg;
-use mvpcc::datagen::data::{prepare_model, CloudPolicy, Layout, PrepareParams, Source};
+use mvpcc::datagen::data::{prepare_model, CloudPolicy, Layout, PrepareParams, Source, ViewsFrame};
 use mvpcc::datagen::mesh::{write_obj, SignedAxis};
 use mvpcc::datagen::raster::render_views;
 use mvpcc::datagen::scan::{ground_truth, partial, scan, PartialParams, PartialSpec};
@@ -79,6 +79,7 @@ fn stages(c: &mut Criterion) {
         clouds: CloudPolicy::Test,
         allow_missing_materials: false,
         max_triangles: 5_000_000,
+        views_frame: ViewsFrame::Object,
     };
     let layout = Layout {
         root: dir.path().join("data"),

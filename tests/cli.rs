@@ -817,6 +817,87 @@ fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings()
     );
 }
 
+/// A scanner partial's cloud is written in the path's frame, turned by the yaw error, but its
+/// views are drawn in the object's frame, where the ground truth's are.
+#[test]
+fn scanner_partials_views_lie_on_the_ground_truth_and_their_clouds_are_turned() {
+    let dir = TempDir::new().unwrap();
+    let data = dir.path().join("data");
+    mvpcc()
+        .args([
+            "prepare",
+            "--synth",
+            "2",
+            "--split",
+            "0",
+            "--partial",
+            "scanner",
+            "-q",
+        ])
+        .args([
+            "--yaw-error",
+            "10",
+            "--samples",
+            "2",
+            "--size",
+            "64",
+            "--gt-size",
+            "256",
+        ])
+        .args([
+            "--views",
+            "5,6",
+            "--min-points",
+            "1000",
+            "--max-points",
+            "4000",
+            "--out",
+        ])
+        .arg(&data)
+        .assert()
+        .success();
+    let manifest = read_json(&data.join("manifest.json"));
+    assert_eq!(manifest["params"]["views_frame"], "object");
+    // The 95th percentile of the distances from `points` to the ground truth.
+    let p95 = |gt: &[[f64; 3]], points: &[[f64; 3]]| {
+        let mut d: Vec<f64> = mvpcc::core::knn::KnnIndex::new(gt)
+            .nearest(points)
+            .into_iter()
+            .map(|(_, d)| d)
+            .collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() * 95 / 100]
+    };
+    let mut turned = 0;
+    for m in manifest["models"].as_array().unwrap() {
+        let (cat, name) = (m["category"].as_str().unwrap(), m["name"].as_str().unwrap());
+        let clouds = data.join("clouds/test").join(cat).join(name);
+        let gt = read_cloud(&clouds.join("gt.ply"), None)
+            .unwrap()
+            .cloud
+            .positions;
+        for sample in m["samples"].as_array().unwrap() {
+            let k = sample["k"].as_u64().unwrap();
+            let views = data
+                .join("in/test")
+                .join(cat)
+                .join(name)
+                .join(k.to_string());
+            let views = mvpcc::views::read_views(&views, None).unwrap();
+            let seen = mvpcc::train::dataset::Decoded::from_images(&views).points();
+            assert!(p95(&gt, &seen) < 0.01, "{cat}/{name}/{k}");
+            let yaw = sample["spec"]["yaw_deg"].as_f64().unwrap();
+            if yaw.abs() > 3.0 {
+                let cloud = clouds.join(format!("partial_{k}.ply"));
+                let cloud = read_cloud(&cloud, None).unwrap().cloud.positions;
+                assert!(p95(&gt, &cloud) > 0.01, "{cat}/{name}/{k} at {yaw}°");
+                turned += 1;
+            }
+        }
+    }
+    assert!(turned > 0, "no sample turned by more than 3°");
+}
+
 #[test]
 fn prepare_reads_a_shapenet_layout_and_skips_bad_meshes_with_a_count() {
     let dir = TempDir::new().unwrap();

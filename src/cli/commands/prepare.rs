@@ -4,7 +4,7 @@ use anyhow::{bail, Context};
 use mvpcc::core::camera::check_view_set;
 use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
-    Source, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
+    Source, ViewsFrame, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
 };
 use mvpcc::datagen::scan::PartialParams;
 use mvpcc::io::atomic_write;
@@ -170,6 +170,7 @@ fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
         clouds: args.clouds,
         allow_missing_materials: args.allow_missing_materials,
         max_triangles: args.max_triangles,
+        views_frame: ViewsFrame::Object,
     })
 }
 

@@ -192,6 +192,22 @@ pub struct PrepareParams {
     pub clouds: CloudPolicy,
     pub allow_missing_materials: bool,
     pub max_triangles: usize,
+    /// The frame of the scanner partials' views; absent (the path's) in directories made
+    /// before 2026-12-02.
+    #[serde(default)]
+    pub views_frame: ViewsFrame,
+}
+
+/// Where a scanner partial's views are drawn. `complete` turns a scan onto its estimated
+/// heading before the network sees it, so the network learns from views in the object's frame,
+/// aligned with the ground truth's; views in the path's frame, turned by up to the yaw error
+/// against the ground truth's, asked the network to undo a turn it cannot see.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ViewsFrame {
+    #[default]
+    Path,
+    Object,
 }
 
 /// One partial sample of a model.

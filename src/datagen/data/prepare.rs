@@ -2,7 +2,7 @@
 
 use super::{
     coarse, split_of, CloudPolicy, Layout, ModelEntry, PrepareParams, SampleEntry, Source,
-    DONE_FILE, GT_COARSE, GT_FINE, TEST,
+    ViewsFrame, DONE_FILE, GT_COARSE, GT_FINE, TEST,
 };
 use crate::core::camera::Camera;
 use crate::core::cloud::PointCloud;
@@ -149,7 +149,17 @@ pub fn prepare_model(
             let (spec, surface) = partial(&mesh, &params.partial, &mut rng);
             let dir = layout.input_views(split, &source.category, &source.name, k);
             create_dir(&dir)?;
-            let views = project(&surface.points, Some(&surface.colors), &cameras);
+            let views = match params.views_frame {
+                ViewsFrame::Path => project(&surface.points, Some(&surface.colors), &cameras),
+                ViewsFrame::Object => {
+                    let aligned: Vec<[f32; 3]> = surface
+                        .points
+                        .iter()
+                        .map(|&p| spec.to_object_frame(p))
+                        .collect();
+                    project(&aligned, Some(&surface.colors), &cameras)
+                }
+            };
             write_views(&dir, &views)?;
             let points = surface.len();
             if keep_partials {

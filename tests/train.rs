@@ -120,12 +120,18 @@ fn a_run_writes_its_files_and_resumes_exactly() {
     let (a, b, c) = (output_of(&whole), output_of(&split), output_of(&shorter));
     let resumed = max_difference(&a, &b);
     let one_step = max_difference(&a, &c);
-    // Measured: 3e-6 to 6e-5 (restored tensors take other SIMD paths, and a GAN amplifies
-    // rounding), while one step fewer moves the output by about 0.1.
-    assert!(resumed < 1e-3, "resumed run differs by {resumed}");
+    // Measured: 3e-6 to 6e-5 on earlier machines, 1.3e-3 on an AVX2-only one (2026-12-02),
+    // while one step fewer moves the output by 0.035 to 0.1. Restored tensors take other SIMD
+    // paths, and the gradients of the biases before each instance norm are rounding noise
+    // that Adam scales up to whole steps, so the bound is relative to one step: a resume that
+    // lost the optimizer's state moves the output by about a step.
     assert!(
         one_step > 1e-2,
         "one step fewer changes the output by only {one_step}"
+    );
+    assert!(
+        resumed < one_step / 10.0,
+        "resumed run differs by {resumed}, one step fewer by {one_step}"
     );
 
     for file in [
@@ -216,6 +222,37 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
         .assert()
         .failure()
         .stderr(predicate::str::contains("cannot be used with"));
+}
+
+#[test]
+fn a_run_without_the_copy_gate_starts_one_with_it_and_not_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, gated) = (dir.path().join("plain"), dir.path().join("gated"));
+    train(&plain, 1, &["--val-every", "0"]).assert().success();
+    base(&gated)
+        .args([
+            "--init",
+            s(&plain),
+            "--input-copy",
+            "--steps",
+            "1",
+            "--val-every",
+            "0",
+        ])
+        .assert()
+        .success();
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(gated.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["input_copy"], true);
+    base(&dir.path().join("back"))
+        .args(["--init", s(&gated), "--config", "tiny", "--steps", "1"])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::starts_with("error: ")
+                .and(predicate::str::contains("--init: expected model config"))
+                .and(predicate::str::contains("\n").count(1)),
+        );
 }
 
 #[test]

@@ -1,12 +1,16 @@
 //! The inpainting generator: a per-view encoder with dilated residual blocks, a fusion
 //! convolution over all views' bottleneck features, and a per-view decoder that sees its own
 //! features beside the fused ones. Encoder and decoder weights are shared by the views.
+//! With [`ModelConfig::copies_input`], a gate blends the input's pixels into the output.
 
 use super::layers::{ConvNorm, ConvSpec, LayerKind, Probe, ResBlock, UpNorm};
 use super::{Fusion, ModelConfig, Padding};
 use burn::module::Module;
-use burn::tensor::activation::relu;
+use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
+
+/// The copy gate's initial bias.
+const GATE_BIAS: f32 = 3.0;
 
 #[derive(Module, Debug)]
 pub struct Generator {
@@ -16,6 +20,7 @@ pub struct Generator {
     fusion: ConvNorm,
     up: Vec<UpNorm>,
     head: ConvNorm,
+    gate: Option<ConvNorm>,
     views: usize,
     channels: usize,
     /// `fusion` reads the input images (early fusion) rather than the bottleneck features.
@@ -100,6 +105,19 @@ impl Generator {
             padding,
             device,
         );
+        // Open from the start (sigmoid(3) ≈ 0.95): the input's pixels are mostly right, and a
+        // generator loaded from weights without the gate then learns where to close it.
+        let gate = config.copies_input().then(|| {
+            ConvNorm::new(
+                ConvSpec {
+                    norm: false,
+                    ..conv([w + planes, 1], 3, 1, 1, LayerKind::Gate)
+                },
+                padding,
+                device,
+            )
+            .with_bias(GATE_BIAS)
+        });
         Generator {
             stem,
             down,
@@ -107,6 +125,7 @@ impl Generator {
             fusion,
             up,
             head,
+            gate,
             views: config.views,
             channels: config.channels.count(),
             early_fusion,
@@ -122,9 +141,9 @@ impl Generator {
     /// [`Self::forward`] with every layer run through `probe`.
     pub fn forward_probed<P: Probe>(&self, input: Tensor<5>, probe: &mut P) -> GeneratorOutput {
         let [batch, _, _, size, _] = input.dims();
-        let features = self.encode(input, probe);
+        let features = self.encode(input.clone(), probe);
         let joined = self.fuse(features, batch, probe);
-        self.decode(joined, batch, size, probe)
+        self.decode(joined, &input, batch, size, probe)
     }
 
     /// The shared per-view encoder: stem, two stride-2 downsamplings, dilated residual blocks
@@ -192,15 +211,16 @@ impl Generator {
         probe.layer(LayerKind::Elementwise, || Tensor::cat(vec![x, fused], 1)) // [B·V, c+f, h, w]
     }
 
-    /// The shared per-view decoder.
+    /// The shared per-view decoder; `input` is what [`Self::encode`] read (for the copy gate).
     ///
     /// # Shapes
-    /// `x`: `[batch · views, 8w (late) or 4w (early), S/4, S/4]` → images
-    /// `[batch, views, channels, S, S]`,
+    /// `x`: `[batch · views, 8w (late) or 4w (early), S/4, S/4]`, `input`: `[batch, views,
+    /// channels + 1, S, S]` → images `[batch, views, channels, S, S]`,
     /// occupancy `[batch, views, 1, S, S]`
     pub fn decode<P: Probe>(
         &self,
         mut x: Tensor<4>,
+        input: &Tensor<5>,
         batch: usize,
         size: usize,
         probe: &mut P,
@@ -209,15 +229,21 @@ impl Generator {
             x = up.forward(x, probe);
             x = probe.layer(LayerKind::Elementwise, || relu(x));
         }
+        let features = x.clone(); // [B·V, w, S, S]
         let x = self.head.forward(x, probe); // [B·V, C+1, S, S]
         let c = self.channels;
-        let x = probe.layer(LayerKind::Elementwise, || {
-            let images = x
-                .clone()
+        let images = probe.layer(LayerKind::Elementwise, || {
+            x.clone()
                 .narrow(1, 0, c)
                 .tanh()
                 .add_scalar(1.0)
-                .div_scalar(2.0);
+                .div_scalar(2.0)
+        }); // [B·V, C, S, S]
+        let images = match &self.gate {
+            Some(gate) => self.copy(images, features, input, gate, probe),
+            None => images,
+        };
+        let x = probe.layer(LayerKind::Elementwise, || {
             Tensor::cat(vec![images, x.narrow(1, c, 1)], 1)
         });
         let x = x.reshape([batch, self.views, c + 1, size, size]); // [B, V, C+1, S, S]
@@ -225,6 +251,32 @@ impl Generator {
             images: x.clone().narrow(2, 0, c),
             occupancy: x.narrow(2, c, 1),
         }
+    }
+
+    /// Blends the input's pixels into `images` by the gate's sigmoid, only where the input's
+    /// occupancy plane is set.
+    ///
+    /// # Shapes
+    /// `images`: `[n, C, S, S]`, `features`: `[n, w, S, S]`, `input`: `[batch, views, C + 1,
+    /// S, S]` with `n = batch · views` → `[n, C, S, S]`
+    fn copy<P: Probe>(
+        &self,
+        images: Tensor<4>,
+        features: Tensor<4>,
+        input: &Tensor<5>,
+        gate: &ConvNorm,
+        probe: &mut P,
+    ) -> Tensor<4> {
+        let [n, c, s, _] = images.dims();
+        let input = input.clone().reshape([n, c + 1, s, s]); // [n, C+1, S, S]
+        let planes = probe.layer(LayerKind::Elementwise, || {
+            Tensor::cat(vec![features, input.clone()], 1)
+        }); // [n, w+C+1, S, S]
+        let logit = gate.forward(planes, probe); // [n, 1, S, S]
+        probe.layer(LayerKind::Elementwise, || {
+            let open = (sigmoid(logit) * input.clone().narrow(1, c, 1)).expand([n, c, s, s]);
+            images.clone() + (input.narrow(1, 0, c) - images) * open
+        })
     }
 }
 
@@ -249,6 +301,49 @@ mod tests {
             assert!(images.iter().all(|v| (0.0..=1.0).contains(v)));
             let logits = out.occupancy.into_data().try_into_vec::<f32>().unwrap();
             assert!(logits.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    /// Where the input has a pixel, the fresh gate (open, sigmoid ≈ 0.95) takes the output
+    /// most of the way from the prediction to the input; elsewhere it changes nothing.
+    #[test]
+    fn the_copy_gate_blends_in_the_input_only_where_it_has_pixels() {
+        let device = Device::flex();
+        let plain = Preset::Tiny.config().with_views(1);
+        let g = plain.init_generator(&device).unwrap();
+        let gate = plain
+            .clone()
+            .with_input_copy_kind(true)
+            .init_generator(&device)
+            .unwrap()
+            .gate;
+        assert!(gate.is_some());
+        // The same weights with the gate beside them.
+        let gated = Generator { gate, ..g.clone() };
+        let s = 32;
+        let values = Tensor::<5>::random([1, 1, 6, s, s], Distribution::Default, &device);
+        let mask: Vec<f32> = (0..s * s).map(|i| (i % 3 == 0) as u8 as f32).collect();
+        let mask = Tensor::<1>::from_floats(mask.as_slice(), &device).reshape([1, 1, 1, s, s]);
+        let x = Tensor::cat(vec![values.clone(), mask], 2);
+        let flat = |t: Tensor<5>| t.into_data().try_into_vec::<f32>().unwrap();
+        let (pred, out, input) = (
+            flat(g.forward(x.clone()).images),
+            flat(gated.forward(x).images),
+            flat(values),
+        );
+        for (i, ((p, o), x)) in pred.iter().zip(&out).zip(&input).enumerate() {
+            if (i % (s * s)) % 3 == 0 {
+                if (x - p).abs() < 1e-3 {
+                    continue;
+                }
+                let moved = (o - p) / (x - p);
+                assert!(
+                    (0.9..0.99).contains(&moved),
+                    "pixel {i}: moved {moved} of the way"
+                );
+            } else {
+                assert_eq!(o, p, "pixel {i} has no input");
+            }
         }
     }
 

@@ -136,7 +136,7 @@ impl Inpainter {
         sync(&self.device)?;
         let probe = &mut NoProbe;
         let start = Instant::now();
-        let features = self.generator.encode(input, probe); // [B·V, 4w, S/4, S/4]
+        let features = self.generator.encode(input.clone(), probe); // [B·V, 4w, S/4, S/4]
         sync(&self.device)?;
         times.encoder = start.elapsed();
         let start = Instant::now();
@@ -146,7 +146,7 @@ impl Inpainter {
         let start = Instant::now();
         let output = self
             .generator
-            .decode(joined, batch.len(), self.config.size, probe);
+            .decode(joined, &input, batch.len(), self.config.size, probe);
         let images = output
             .images
             .into_data()

@@ -140,7 +140,13 @@ pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
     store.get_bytes().map_err(|e| WeightsError::Save(e.into()))
 }
 
-pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
+///
+/// `fresh` names a field whose tensors the file may lack: they keep their initialization.
+pub(crate) fn apply<M: Module>(
+    module: &mut M,
+    bytes: &[u8],
+    fresh: Option<&str>,
+) -> Result<(), WeightsError> {
     // Partial and unvalidated, so that what does not fit comes back as data to word in one
     // line instead of Burn's multi-line report.
     let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()))
@@ -159,11 +165,17 @@ pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), Weigh
             e.to_string(),
         ));
     }
-    if let Some((path, _)) = result.missing.first() {
+    let missing: Vec<&String> = result
+        .missing
+        .iter()
+        .map(|(path, _)| path)
+        .filter(|path| fresh.is_none_or(|field| !path.starts_with(&format!("{field}."))))
+        .collect();
+    if let Some(path) = missing.first() {
         return Err(problem(
-            result.missing.len(),
+            missing.len(),
             "tensors the network needs are missing",
-            path.clone(),
+            path.to_string(),
         ));
     }
     if let Some(unused) = result.unused.first() {
@@ -190,7 +202,7 @@ pub fn generator_from_bytes(
 ) -> Result<(Generator, ModelConfig), WeightsError> {
     let config = read_config(bytes, Network::Generator)?;
     let mut generator = config.init_generator(device)?;
-    apply(&mut generator, bytes)?;
+    apply(&mut generator, bytes, None)?;
     Ok((generator, config))
 }
 
@@ -215,7 +227,7 @@ pub fn discriminator_from_bytes(
         });
     }
     let mut discriminator = config.init_discriminator(device)?;
-    apply(&mut discriminator, bytes)?;
+    apply(&mut discriminator, bytes, None)?;
     Ok(discriminator)
 }
 
@@ -249,16 +261,23 @@ fn network_for<M: Module>(
     config: &ModelConfig,
     init: impl FnOnce(&ModelConfig) -> Result<M, ConfigError>,
 ) -> Result<M, WeightsError> {
-    compatible(&read_config(bytes, network)?, config)?;
+    let found = read_config(bytes, network)?;
+    compatible(&found, config)?;
     let mut module = init(config)?;
-    apply(&mut module, bytes)?;
+    let gains_gate = config.copies_input() && !found.copies_input();
+    apply(&mut module, bytes, gains_gate.then_some("gate"))?;
     Ok(module)
 }
 
 /// Whether weights made for `found` fit a network built from `expected`: every field but the
-/// image size equal.
+/// image size equal, and the copy gate may be added (it starts fresh; see
+/// [`ModelConfig::copies_input`]).
 pub fn compatible(found: &ModelConfig, expected: &ModelConfig) -> Result<(), WeightsError> {
-    if found.clone().with_size(expected.size) == *expected {
+    let mut fitted = found.clone().with_size(expected.size);
+    if expected.copies_input() {
+        fitted = fitted.with_input_copy_kind(true);
+    }
+    if fitted == *expected {
         return Ok(());
     }
     Err(WeightsError::ConfigMismatch {
@@ -338,6 +357,38 @@ mod tests {
             generator_for(&d_bytes, &large, &device),
             Err(WeightsError::WrongNetwork { .. })
         ));
+    }
+
+    #[test]
+    fn weights_without_the_copy_gate_start_a_model_with_it_and_not_back() {
+        let device = Device::flex();
+        let plain = Preset::Tiny.config();
+        let copying = plain.clone().with_input_copy_kind(true);
+        let g = plain.init_generator(&device).unwrap();
+        let bytes = generator_to_bytes(&g, &plain).unwrap();
+        let gated = generator_for(&bytes, &copying, &device).unwrap();
+        // Every loaded tensor is the file's: where the input has no pixel, the outputs agree.
+        let mut x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
+        x = x.slice_assign(
+            [0..1, 0..4, 6..7, 0..32, 0..32],
+            Tensor::zeros([1, 4, 1, 32, 32], &device),
+        );
+        assert_eq!(
+            g.forward(x.clone()).images.into_data(),
+            gated.forward(x).images.into_data()
+        );
+        let gated_bytes = generator_to_bytes(&gated, &copying).unwrap();
+        assert!(matches!(
+            generator_for(&gated_bytes, &plain, &device),
+            Err(WeightsError::ConfigMismatch { .. })
+        ));
+        let (back, config) = generator_from_bytes(&gated_bytes, &device).unwrap();
+        assert!(config.copies_input());
+        let y = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
+        assert_eq!(
+            gated.forward(y.clone()).images.into_data(),
+            back.forward(y).images.into_data()
+        );
     }
 
     #[test]

@@ -121,9 +121,14 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
     let fresh_model = |mut base: ModelConfig| {
         base.channels = args.channels.unwrap_or(base.channels);
         base.size = args.size.unwrap_or(base.size);
-        match args.fusion {
+        let base = match args.fusion {
             Some(fusion) => base.with_fusion_kind(fusion),
             None => base,
+        };
+        if args.input_copy {
+            base.with_input_copy_kind(true)
+        } else {
+            base
         }
     };
     let (settings, mut model) = if args.resume {

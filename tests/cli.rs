@@ -139,7 +139,23 @@ fn eval_over_directories_matches_by_path_without_extension() {
         .clone();
     let stderr = String::from_utf8(stderr).unwrap();
     assert!(
-        stderr.contains("only in predictions: [d]") && stderr.contains("only in ground truth: [c]"),
+        stderr.contains("only in predictions: 1 [d]")
+            && stderr.contains("only in ground truth: 1 [c]"),
+        "{stderr}"
+    );
+    // A whole tree that does not match is counted, with a few of its names, on one line.
+    for name in ["e", "f", "g", "h", "i", "j", "k"] {
+        let path = gt.join(format!("{name}.ply"));
+        write_cloud(&path, &full.cloud, None, Encoding::Binary).unwrap();
+    }
+    let assert = mvpcc()
+        .args(["eval", "--pred-dir", s(&pred), "--gt-dir", s(&gt)])
+        .assert()
+        .failure();
+    let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
+    assert!(
+        stderr.contains("only in ground truth: 8 [c, e, f, g, h, …]")
+            && stderr.lines().count() == 1,
         "{stderr}"
     );
 }

@@ -43,6 +43,18 @@ fn cloud_files(dir: &Path, format: Option<Format>) -> anyhow::Result<BTreeMap<St
     Ok(files)
 }
 
+/// How many `names` there are and the first few, so a whole tree that does not match is still
+/// one readable line.
+fn some_of(names: &[&str]) -> String {
+    const SHOWN: usize = 5;
+    let shown = names[..names.len().min(SHOWN)].join(", ");
+    match names.len() {
+        0 => "none".to_string(),
+        n if n <= SHOWN => format!("{n} [{shown}]"),
+        n => format!("{n} [{shown}, …]"),
+    }
+}
+
 fn matched_pairs(
     pred_dir: &Path,
     gt_dir: &Path,
@@ -62,11 +74,11 @@ fn matched_pairs(
         .collect();
     if !only_pred.is_empty() || !only_gt.is_empty() {
         bail!(
-            "{} and {}: unmatched file stems: only in predictions: [{}]; only in ground truth: [{}]",
+            "{} and {}: unmatched file stems: only in predictions: {}; only in ground truth: {}",
             pred_dir.display(),
             gt_dir.display(),
-            only_pred.join(", "),
-            only_gt.join(", ")
+            some_of(&only_pred),
+            some_of(&only_gt)
         );
     }
     if preds.is_empty() {

@@ -839,39 +839,13 @@ fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings()
 fn scanner_partials_views_lie_on_the_ground_truth_and_their_clouds_are_turned() {
     let dir = TempDir::new().unwrap();
     let data = dir.path().join("data");
-    mvpcc()
-        .args([
-            "prepare",
-            "--synth",
-            "2",
-            "--split",
-            "0",
-            "--partial",
-            "scanner",
-            "-q",
-        ])
-        .args([
-            "--yaw-error",
-            "10",
-            "--samples",
-            "2",
-            "--size",
-            "64",
-            "--gt-size",
-            "256",
-        ])
-        .args([
-            "--views",
-            "5,6",
-            "--min-points",
-            "1000",
-            "--max-points",
-            "4000",
-            "--out",
-        ])
-        .arg(&data)
-        .assert()
-        .success();
+    #[rustfmt::skip]
+    let args = [
+        "prepare", "--synth", "2", "--split", "0", "--partial", "scanner", "-q",
+        "--yaw-error", "10", "--samples", "2", "--size", "64", "--gt-size", "256",
+        "--views", "5,6", "--min-points", "1000", "--max-points", "4000", "--out",
+    ];
+    mvpcc().args(args).arg(&data).assert().success();
     let manifest = read_json(&data.join("manifest.json"));
     assert_eq!(manifest["params"]["views_frame"], "object");
     // The 95th percentile of the distances from `points` to the ground truth.

@@ -177,6 +177,15 @@ fn a_run_writes_its_files_and_resumes_exactly() {
     );
 }
 
+/// `cmd` (a run with `--init`) fails with one line saying the weights' config does not fit.
+fn refused_for_its_config(cmd: &mut Command) {
+    cmd.assert().failure().stderr(
+        predicate::str::starts_with("error: ")
+            .and(predicate::str::contains("--init: expected model config"))
+            .and(predicate::str::contains("\n").count(1)),
+    );
+}
+
 /// The steps of a run's validation records, in log order.
 fn validated_steps(run: &Path) -> Vec<u64> {
     std::fs::read_to_string(run.join("log.jsonl"))
@@ -207,16 +216,10 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
     assert!(settings.contains("generator.safetensors"), "{settings}");
 
     let third = dir.path().join("third");
-    base(&third)
-        .args(["--init", s(&first.join("generator.safetensors"))])
-        .args(["--config", "small", "--size", "32", "--steps", "1"])
-        .assert()
-        .failure()
-        .stderr(
-            predicate::str::starts_with("error: ")
-                .and(predicate::str::contains("--init: expected model config"))
-                .and(predicate::str::contains("\n").count(1)),
-        );
+    let mut cmd = base(&third);
+    cmd.args(["--init", s(&first.join("generator.safetensors"))])
+        .args(["--config", "small", "--size", "32", "--steps", "1"]);
+    refused_for_its_config(&mut cmd);
     base(&third)
         .args(["--init", s(&first), "--resume"])
         .assert()
@@ -244,15 +247,9 @@ fn a_run_without_the_copy_gate_starts_one_with_it_and_not_back() {
     let config: serde_json::Value =
         serde_json::from_slice(&std::fs::read(gated.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["input_copy"], true);
-    base(&dir.path().join("back"))
-        .args(["--init", s(&gated), "--config", "tiny", "--steps", "1"])
-        .assert()
-        .failure()
-        .stderr(
-            predicate::str::starts_with("error: ")
-                .and(predicate::str::contains("--init: expected model config"))
-                .and(predicate::str::contains("\n").count(1)),
-        );
+    let mut cmd = base(&dir.path().join("back"));
+    cmd.args(["--init", s(&gated), "--config", "tiny", "--steps", "1"]);
+    refused_for_its_config(&mut cmd);
 }
 
 #[test]

@@ -140,8 +140,9 @@ pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
     store.get_bytes().map_err(|e| WeightsError::Save(e.into()))
 }
 
-///
-/// `fresh` names a field whose tensors the file may lack: they keep their initialization.
+/// Loads `bytes` into `module`; a tensor the file lacks, has extra or shapes otherwise is an
+/// error, except that the tensors under the field `fresh` may be missing (they keep their
+/// initialization).
 pub(crate) fn apply<M: Module>(
     module: &mut M,
     bytes: &[u8],
@@ -165,11 +166,16 @@ pub(crate) fn apply<M: Module>(
             e.to_string(),
         ));
     }
+    let fresh = fresh.map(|field| format!("{field}."));
     let missing: Vec<&String> = result
         .missing
         .iter()
         .map(|(path, _)| path)
-        .filter(|path| fresh.is_none_or(|field| !path.starts_with(&format!("{field}."))))
+        .filter(|path| {
+            fresh
+                .as_ref()
+                .is_none_or(|prefix| !path.starts_with(prefix))
+        })
         .collect();
     if let Some(path) = missing.first() {
         return Err(problem(

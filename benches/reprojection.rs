@@ -26,7 +26,7 @@ fn reprojection(c: &mut Criterion) {
     group.bench_function("snap onto pixel rays, 4 dense views of 256²", |b| {
         b.iter_batched_ref(
             || views.clone(),
-            |v| snap_to_rays(v, &cameras),
+            |v| snap_to_rays(v, &cameras, None),
             BatchSize::LargeInput,
         )
     });

@@ -576,15 +576,15 @@ pub struct TrainArgs {
     /// input images, before the shared encoder; the paper's Table 6) [default: the config's].
     #[arg(long, value_enum)]
     pub fusion: Option<Fusion>,
-    /// Give the generator the copy gate: each output pixel may take the input's pixel where the
-    /// input has one, by a learned per-pixel blend (docs/network.md) [default: the config's]
+    /// Keep the input's pixels: the generator's output is the input wherever the input has a
+    /// pixel, so it learns only the pixels it completes (docs/network.md) [default: the config's]
     #[arg(long)]
     pub input_copy: bool,
     /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
     /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
     /// a folder holding model.safetensors and discriminator.safetensors (as assets/). The model
-    /// config is the weights' own unless --config gives one; only --size may differ from it,
-    /// and --input-copy may add the copy gate (it starts fresh).
+    /// config is the weights' own unless --config gives one; only --size and --input-copy may
+    /// differ from it.
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
     /// The discriminator's weights to start from with --init, over the one --init finds.

@@ -25,7 +25,7 @@ use crate::core::knn::KnnIndex;
 use crate::model::inpaint::{InpaintError, Inpainter};
 use crate::model::weights::WeightsError;
 use crate::views::projection::{project, ViewImages};
-use crate::views::reprojection::{reproject, snap_to_rays, ReprojectOptions};
+use crate::views::reprojection::{reproject, reproject_keeping, snap_to_rays, ReprojectOptions};
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use serde::Serialize;
@@ -498,24 +498,24 @@ fn run_network(
 
     let start = Instant::now();
     let mut inpainted = out.pop().expect("one object in, one out");
-    let views = options.keep_views.then(|| {
-        let [input] = batch;
-        NetworkViews {
-            input,
-            output: inpainted.clone(),
-        }
+    let views = options.keep_views.then(|| NetworkViews {
+        input: batch[0].clone(),
+        output: inpainted.clone(),
     });
+    // The pixels a copying generator took from its input are measured points.
+    let measured = inpainter.config().copies_input().then_some(&batch[0]);
     if options.snap {
-        snap_to_rays(&mut inpainted, &cameras);
+        snap_to_rays(&mut inpainted, &cameras, measured);
     }
-    let predicted = reproject(
-        &inpainted,
-        ReprojectOptions {
-            erode: options.erode,
-            smooth: options.smooth,
-            ..ReprojectOptions::default()
-        },
-    );
+    let reproject_options = ReprojectOptions {
+        erode: options.erode,
+        smooth: options.smooth,
+        ..ReprojectOptions::default()
+    };
+    let predicted = match measured {
+        Some(measured) => reproject_keeping(&inpainted, reproject_options, measured),
+        None => reproject(&inpainted, reproject_options),
+    };
     timings.reprojection = start.elapsed();
 
     let start = Instant::now();
@@ -688,7 +688,7 @@ mod tests {
     use super::*;
     use crate::datagen::shapes::{example_car, scanned_side};
     use crate::model::weights::generator_to_bytes;
-    use crate::model::Preset;
+    use crate::model::{ModelConfig, Preset};
     use burn::tensor::Device;
 
     fn options(method: Method) -> Options {
@@ -712,14 +712,40 @@ mod tests {
     }
 
     fn tiny_inpainter() -> Inpainter {
+        inpainter_for(Preset::Tiny.config())
+    }
+
+    fn inpainter_for(config: ModelConfig) -> Inpainter {
         let device = Device::flex();
-        let config = Preset::Tiny.config();
         let g = config.init_generator(&device).unwrap();
         Inpainter::from_bytes(&generator_to_bytes(&g, &config).unwrap(), device).unwrap()
     }
 
     fn flags(cloud: &PointCloud) -> &[f64] {
         &cloud.attribute(SYNTHETIC).unwrap().values
+    }
+
+    /// The paper's first steps composed by hand: the frame, the input's views and what
+    /// `inpainter` makes of them.
+    fn paper_views(
+        input: &PointCloud,
+        inpainter: &Inpainter,
+        options: &Options,
+    ) -> (Frame, ViewImages, ViewImages) {
+        let frame = Frame::fit(input, UpAxis::Y).unwrap();
+        let points: Vec<[f32; 3]> = input
+            .positions
+            .iter()
+            .map(|&p| frame.to_normalized(p).map(|c| c as f32))
+            .collect();
+        let cameras = Camera::set(&options.views, inpainter.config().size).unwrap();
+        let views = project(&points, input.colors.as_deref(), &cameras);
+        let inpainted = inpainter
+            .inpaint(std::slice::from_ref(&views))
+            .unwrap()
+            .pop()
+            .unwrap();
+        (frame, views, inpainted)
     }
 
     /// `--paper` is the paper's steps in the paper's order and nothing else: the same stage
@@ -731,15 +757,7 @@ mod tests {
         let options = Options::paper(UpAxis::Y, None);
         let done = complete(&input, Some(&inpainter), &options).unwrap();
 
-        let frame = Frame::fit(&input, UpAxis::Y).unwrap();
-        let points: Vec<[f32; 3]> = input
-            .positions
-            .iter()
-            .map(|&p| frame.to_normalized(p).map(|c| c as f32))
-            .collect();
-        let cameras = Camera::set(&options.views, inpainter.config().size).unwrap();
-        let views = project(&points, input.colors.as_deref(), &cameras);
-        let inpainted = inpainter.inpaint(&[views]).unwrap().pop().unwrap();
+        let (frame, _, inpainted) = paper_views(&input, &inpainter, &options);
         let eroded = reproject(&inpainted, ReprojectOptions::default());
         let kept = eroded.filter(&inliers(&eroded.positions, SorParams::default()));
         let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
@@ -755,6 +773,33 @@ mod tests {
         );
         assert_eq!(ReprojectOptions::default().erode, 3);
         assert_eq!((options.sor.k, options.sor.std_mul), (20, 5.0));
+    }
+
+    /// With a model that keeps its input's pixels, the erosion spares them: the paper's steps
+    /// with [`reproject_keeping`] in place of [`reproject`], and more points than eroding all.
+    #[test]
+    fn a_copying_models_measured_pixels_are_not_eroded() {
+        let input = partial();
+        let inpainter = inpainter_for(Preset::Tiny.config().with_input_copy_kind(true));
+        let options = Options::paper(UpAxis::Y, None);
+        let done = complete(&input, Some(&inpainter), &options).unwrap();
+
+        let (frame, views, inpainted) = paper_views(&input, &inpainter, &options);
+        let filtered = |cloud: PointCloud| cloud.filter(&inliers(&cloud.positions, options.sor));
+        let kept = filtered(reproject_keeping(
+            &inpainted,
+            ReprojectOptions::default(),
+            &views,
+        ));
+        let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
+        assert_eq!(done.cloud.positions, expected);
+        let eroded = filtered(reproject(&inpainted, ReprojectOptions::default()));
+        assert!(
+            eroded.len() < kept.len(),
+            "{} vs {}",
+            eroded.len(),
+            kept.len()
+        );
     }
 
     #[test]

@@ -23,8 +23,6 @@ pub enum LayerKind {
     ConvResidual,
     /// The 3×3 convolution over all views' features.
     Fusion,
-    /// The 3×3 convolution of the copy gate.
-    Gate,
     ConvTranspose,
     InstanceNorm,
     /// ReLU, residual sums, concatenation and reshapes, the output's tanh.
@@ -39,7 +37,6 @@ impl LayerKind {
             LayerKind::ConvDown => "conv 4x4 stride 2",
             LayerKind::ConvResidual => "conv 3x3 residual",
             LayerKind::Fusion => "conv 3x3 fusion",
-            LayerKind::Gate => "conv 3x3 copy gate",
             LayerKind::ConvTranspose => "conv transposed",
             LayerKind::InstanceNorm => "instance norm",
             LayerKind::Elementwise => "elementwise",
@@ -174,15 +171,6 @@ impl ConvNorm {
             shifted,
             kind: spec.kind,
         }
-    }
-
-    /// The layer with every bias set to `value`.
-    pub fn with_bias(mut self, value: f32) -> ConvNorm {
-        self.conv.bias = self
-            .conv
-            .bias
-            .map(|b| b.map(|t| t.zeros_like().add_scalar(value)));
-        self
     }
 
     /// # Shapes

@@ -94,9 +94,8 @@ pub struct ModelConfig {
     /// `Some(Fusion::Early)` for early fusion; `None` is late fusion, as in every weights file
     /// written before this choice existed (see [`ModelConfig::fusion`]).
     pub fusion: Option<Fusion>,
-    /// `Some(true)`: a gate lets each output pixel copy the input's pixel where the input has
-    /// one (see [`ModelConfig::copies_input`]); `None` in every weights file written before
-    /// the gate existed.
+    /// `Some(true)`: the output keeps the input's pixels (see [`ModelConfig::copies_input`]);
+    /// `None` in every weights file written before the choice existed.
     pub input_copy: Option<bool>,
 }
 
@@ -208,16 +207,17 @@ impl ModelConfig {
         self.with_fusion((fusion == Fusion::Early).then_some(Fusion::Early))
     }
 
-    /// Whether the generator has the copy gate: a 3×3 convolution over the decoder's last
-    /// features and the input planes whose sigmoid, where the input has a pixel, blends the
-    /// input's geometry and colour into the prediction. Without it the decoder must rebuild
-    /// every measured pixel from quarter-size features, which it does to a few pixels' depth
-    /// (docs/training.md); with it the network spends itself on the pixels it completes.
+    /// Whether the generator's output keeps the input's pixels: where the input has one, its
+    /// geometry and colour replace the prediction's and the pixel is occupied, as inpainting
+    /// networks composite their output with the known image. Without it the decoder must
+    /// rebuild every measured pixel from quarter-size features, which it does to a few pixels'
+    /// depth (docs/training.md); with it the network spends itself on the pixels it completes.
+    /// It adds no weights, so weights trained either way load either way.
     pub fn copies_input(&self) -> bool {
         self.input_copy == Some(true)
     }
 
-    /// Sets the copy gate, written as `None` when off so that configs compare equal to files
+    /// Sets the input copy, written as `None` when off so that configs compare equal to files
     /// that predate it.
     pub fn with_input_copy_kind(self, copy: bool) -> ModelConfig {
         self.with_input_copy(copy.then_some(true))
@@ -262,12 +262,7 @@ impl ModelConfig {
                 s * s * 49.0 * w * w - q * q * 16.0 * 4.0 * w * 2.0 * w,
             ),
         };
-        let gate = if self.copies_input() {
-            s * s * 9.0 * (w + cin)
-        } else {
-            0.0
-        };
-        2.0 * (v * (per_view + extra + gate) + fusion) / 1e9
+        2.0 * (v * (per_view + extra) + fusion) / 1e9
     }
 }
 

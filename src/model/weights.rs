@@ -141,13 +141,8 @@ pub(crate) fn to_bytes<M: Module, C: serde::Serialize>(
 }
 
 /// Loads `bytes` into `module`; a tensor the file lacks, has extra or shapes otherwise is an
-/// error, except that the tensors under the field `fresh` may be missing (they keep their
-/// initialization).
-pub(crate) fn apply<M: Module>(
-    module: &mut M,
-    bytes: &[u8],
-    fresh: Option<&str>,
-) -> Result<(), WeightsError> {
+/// error.
+pub(crate) fn apply<M: Module>(module: &mut M, bytes: &[u8]) -> Result<(), WeightsError> {
     // Partial and unvalidated, so that what does not fit comes back as data to word in one
     // line instead of Burn's multi-line report.
     let mut store = SafetensorsStore::from_bytes(Some(bytes.to_vec()))
@@ -166,20 +161,9 @@ pub(crate) fn apply<M: Module>(
             e.to_string(),
         ));
     }
-    let fresh = fresh.map(|field| format!("{field}."));
-    let missing: Vec<&String> = result
-        .missing
-        .iter()
-        .map(|(path, _)| path)
-        .filter(|path| {
-            fresh
-                .as_ref()
-                .is_none_or(|prefix| !path.starts_with(prefix))
-        })
-        .collect();
-    if let Some(path) = missing.first() {
+    if let Some((path, _)) = result.missing.first() {
         return Err(problem(
-            missing.len(),
+            result.missing.len(),
             "tensors the network needs are missing",
             path.to_string(),
         ));
@@ -208,7 +192,7 @@ pub fn generator_from_bytes(
 ) -> Result<(Generator, ModelConfig), WeightsError> {
     let config = read_config(bytes, Network::Generator)?;
     let mut generator = config.init_generator(device)?;
-    apply(&mut generator, bytes, None)?;
+    apply(&mut generator, bytes)?;
     Ok((generator, config))
 }
 
@@ -233,7 +217,7 @@ pub fn discriminator_from_bytes(
         });
     }
     let mut discriminator = config.init_discriminator(device)?;
-    apply(&mut discriminator, bytes, None)?;
+    apply(&mut discriminator, bytes)?;
     Ok(discriminator)
 }
 
@@ -270,19 +254,17 @@ fn network_for<M: Module>(
     let found = read_config(bytes, network)?;
     compatible(&found, config)?;
     let mut module = init(config)?;
-    let gains_gate = config.copies_input() && !found.copies_input();
-    apply(&mut module, bytes, gains_gate.then_some("gate"))?;
+    apply(&mut module, bytes)?;
     Ok(module)
 }
 
-/// Whether weights made for `found` fit a network built from `expected`: every field but the
-/// image size equal, and the copy gate may be added (it starts fresh; see
-/// [`ModelConfig::copies_input`]).
+/// Whether weights made for `found` fit a network built from `expected`: every field equal but
+/// the image size and the input copy, which change no weight ([`ModelConfig::copies_input`]).
 pub fn compatible(found: &ModelConfig, expected: &ModelConfig) -> Result<(), WeightsError> {
-    let mut fitted = found.clone().with_size(expected.size);
-    if expected.copies_input() {
-        fitted = fitted.with_input_copy_kind(true);
-    }
+    let fitted = found
+        .clone()
+        .with_size(expected.size)
+        .with_input_copy(expected.input_copy);
     if fitted == *expected {
         return Ok(());
     }
@@ -365,15 +347,16 @@ mod tests {
         ));
     }
 
+    /// The input copy adds no weights: weights trained without it load into a model with it
+    /// and back, and predict the same where the input has no pixel.
     #[test]
-    fn weights_without_the_copy_gate_start_a_model_with_it_and_not_back() {
+    fn weights_load_with_and_without_the_input_copy() {
         let device = Device::flex();
         let plain = Preset::Tiny.config();
         let copying = plain.clone().with_input_copy_kind(true);
         let g = plain.init_generator(&device).unwrap();
         let bytes = generator_to_bytes(&g, &plain).unwrap();
-        let gated = generator_for(&bytes, &copying, &device).unwrap();
-        // Every loaded tensor is the file's: where the input has no pixel, the outputs agree.
+        let copier = generator_for(&bytes, &copying, &device).unwrap();
         let mut x = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
         x = x.slice_assign(
             [0..1, 0..4, 6..7, 0..32, 0..32],
@@ -381,19 +364,15 @@ mod tests {
         );
         assert_eq!(
             g.forward(x.clone()).images.into_data(),
-            gated.forward(x).images.into_data()
+            copier.forward(x.clone()).images.into_data()
         );
-        let gated_bytes = generator_to_bytes(&gated, &copying).unwrap();
-        assert!(matches!(
-            generator_for(&gated_bytes, &plain, &device),
-            Err(WeightsError::ConfigMismatch { .. })
-        ));
-        let (back, config) = generator_from_bytes(&gated_bytes, &device).unwrap();
+        let copier_bytes = generator_to_bytes(&copier, &copying).unwrap();
+        let (back, config) = generator_from_bytes(&copier_bytes, &device).unwrap();
         assert!(config.copies_input());
-        let y = Tensor::<5>::random([1, 4, 7, 32, 32], Distribution::Default, &device);
+        let plain_again = generator_for(&copier_bytes, &plain, &device).unwrap();
         assert_eq!(
-            gated.forward(y.clone()).images.into_data(),
-            back.forward(y).images.into_data()
+            back.forward(x.clone()).images.into_data(),
+            plain_again.forward(x).images.into_data()
         );
     }
 

@@ -9,7 +9,7 @@ use crate::core::camera::Camera;
 use crate::metrics::{compare_clouds, compare_images, ImageMetrics};
 use crate::model::inpaint::Inpainter;
 use crate::views::projection::ViewImages;
-use crate::views::reprojection::{reproject, ReprojectOptions};
+use crate::views::reprojection::{reproject, reproject_keeping, ReprojectOptions};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -137,12 +137,16 @@ fn score_cloud(points: &[[f64; 3]], gt: &[[f64; 3]]) -> Cloud3d {
     }
 }
 
-/// The completed cloud of inpainted views: re-projected with the default 3×3 erosion, then
+/// The completed cloud of inpainted views: re-projected with the default 3×3 erosion (which
+/// spares the pixels of `measured`, the input's views, when the generator kept them), then
 /// filtered (20 neighbours, σ = 5), as `complete --no-snap --no-keep-input` makes it. The XYZ
 /// stay as the network predicts them: these scores end stages and pick the best checkpoint, and
 /// the recorded training recipe (README, *The default model*) was run with them so.
-pub fn completed_cloud(views: &ViewImages) -> Vec<[f64; 3]> {
-    let cloud = reproject(views, ReprojectOptions::default());
+pub fn completed_cloud(views: &ViewImages, measured: Option<&ViewImages>) -> Vec<[f64; 3]> {
+    let cloud = match measured {
+        Some(measured) => reproject_keeping(views, ReprojectOptions::default(), measured),
+        None => reproject(views, ReprojectOptions::default()),
+    };
     let keep = inliers(&cloud.positions, SorParams::default());
     cloud
         .positions
@@ -208,10 +212,14 @@ pub fn validate(
                 .expect("validation views are rendered at the model's size and view count"),
         );
     }
+    let copied = inpainter.config().copies_input();
     let clouds = items
         .par_iter()
         .zip(&outputs)
-        .map(|(item, out)| score_cloud(&completed_cloud(out), &item.gt_cloud))
+        .map(|(item, out)| {
+            let measured = copied.then_some(&item.input);
+            score_cloud(&completed_cloud(out, measured), &item.gt_cloud)
+        })
         .collect();
     let color = inpainter.config().channels == crate::model::Channels::Xyzrgb
         && items.iter().all(|i| i.target.has_color);

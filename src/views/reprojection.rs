@@ -179,19 +179,23 @@ fn median_xyz(px: &[f32], occupied: &[bool], size: usize, at: usize, k: usize) -
 /// image's rim a ray at the predicted depth can leave the unit box the network's XYZ are bound
 /// to; such points are kept (clamped into the box instead, the validation split of README
 /// *Quality* scored F1 0.6796 vs 0.6793 and a worse CD on trucks, 1.05e-3 vs 8.9e-4: their
-/// scans can be shorter than the vehicle).
-pub fn snap_to_rays(views: &mut ViewImages, cameras: &[Camera]) {
+/// scans can be shorter than the vehicle). Pixels occupied in `measured` stay where they are:
+/// a generator that keeps its input's pixels (`ModelConfig::copies_input`) returns the
+/// measured points there, which lie anywhere in their pixel, not on its centre's ray.
+pub fn snap_to_rays(views: &mut ViewImages, cameras: &[Camera], measured: Option<&ViewImages>) {
     let size = views.size;
     let plane = size * size;
     assert_eq!(cameras.len(), views.views(), "one camera per view");
     let occupancy = &views.occupancy;
+    let spared = |v: usize, at: usize| measured.is_some_and(|m| m.view_occupancy(v)[at]);
     views
         .pixels
         .par_chunks_mut(CHANNELS * plane)
         .zip(occupancy.par_chunks(plane))
         .zip(cameras.par_iter())
-        .for_each(|((px, occupied), camera)| {
-            for at in (0..plane).filter(|&at| occupied[at]) {
+        .enumerate()
+        .for_each(|(v, ((px, occupied), camera))| {
+            for at in (0..plane).filter(|&at| occupied[at] && !spared(v, at)) {
                 let p = [0, 1, 2].map(|c| px[c * plane + at] as f64);
                 let q = camera.on_ray(at / size, at % size, p);
                 for c in 0..3 {
@@ -204,13 +208,41 @@ pub fn snap_to_rays(views: &mut ViewImages, cameras: &[Camera]) {
 /// Occupied pixels (after erosion) of every view, as one de-duplicated cloud in normalized
 /// coordinates, with colour when the views carry it.
 pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
+    reproject_masked(views, options, |v| {
+        erode(views.view_occupancy(v), views.size, options.erode)
+    })
+}
+
+/// [`reproject`] with the pixels `measured` has spared by the erosion. A generator that keeps
+/// its input's pixels (`ModelConfig::copies_input`) returns those exactly, so the rim the
+/// erosion is for is only the rim of what it completed.
+pub fn reproject_keeping(
+    views: &ViewImages,
+    options: ReprojectOptions,
+    measured: &ViewImages,
+) -> PointCloud {
+    reproject_masked(views, options, |v| {
+        let mut mask = erode(views.view_occupancy(v), views.size, options.erode);
+        for (kept, &seen) in mask.iter_mut().zip(measured.view_occupancy(v)) {
+            *kept |= seen;
+        }
+        mask
+    })
+}
+
+/// The pixels `mask_of(view)` of every view, as [`reproject`] collects them.
+fn reproject_masked(
+    views: &ViewImages,
+    options: ReprojectOptions,
+    mask_of: impl Fn(usize) -> Vec<bool> + Sync,
+) -> PointCloud {
     let size = views.size;
     let plane = size * size;
     type ViewPoints = (Vec<[f64; 3]>, Vec<[u8; 3]>);
     let per_view: Vec<ViewPoints> = (0..views.views())
         .into_par_iter()
         .map(|v| {
-            let mask = erode(views.view_occupancy(v), size, options.erode);
+            let mask = mask_of(v);
             let px = views.view_pixels(v);
             let mut positions = Vec::new();
             let mut colors = Vec::new();
@@ -317,11 +349,56 @@ mod tests {
                 / cloud.len() as f64
         };
         let before = off_roof(&views);
-        snap_to_rays(&mut views, &cameras);
+        snap_to_rays(&mut views, &cameras, None);
         let after = off_roof(&views);
         // What is left is the pixel's own width: the centre ray meets the seen point's depth
         // within half a pixel of it, off the roof by that times the ray's slope.
         assert!(before > 0.03 && after < before / 4.0, "{before} → {after}");
+    }
+
+    /// A copying generator's measured pixels are measured points: snapping leaves them off
+    /// their centre rays and the erosion leaves their rim, while it still eats the rest.
+    #[test]
+    fn measured_pixels_are_neither_snapped_nor_eroded() {
+        let roof: Vec<[f32; 3]> = (0..200)
+            .flat_map(|i| {
+                (0..100).map(move |j| [i as f32 / 400.0 - 0.25, 0.1, j as f32 / 400.0 - 0.125])
+            })
+            .collect();
+        let cameras = Camera::set(&[5], 64).unwrap();
+        let measured = project(&roof, None, &cameras);
+        // The completed view: the measured pixels and a band of predicted ones beside them.
+        let mut completed = measured.clone();
+        let plane = 64 * 64;
+        let predicted: Vec<usize> = (0..plane)
+            .filter(|&at| !measured.occupancy[at] && measured.occupancy[at.saturating_sub(3)])
+            .collect();
+        assert!(!predicted.is_empty());
+        for &at in &predicted {
+            completed.occupancy[at] = true;
+            for c in 0..3 {
+                completed.pixels[c * plane + at] = measured.pixels[c * plane + at - 3];
+            }
+        }
+        let mut snapped = completed.clone();
+        snap_to_rays(&mut snapped, &cameras, Some(&measured));
+        for at in 0..plane {
+            let same =
+                (0..3).all(|c| snapped.pixels[c * plane + at] == completed.pixels[c * plane + at]);
+            assert_eq!(same, !predicted.contains(&at), "pixel {at}");
+        }
+        let count = |cloud: PointCloud| cloud.len();
+        let options = |erode| ReprojectOptions {
+            erode,
+            dedup_tolerance: 0.0,
+            smooth: 0,
+        };
+        let all = count(reproject(&completed, options(0)));
+        let kept = count(reproject_keeping(&completed, options(3), &measured));
+        let eroded = count(reproject(&completed, options(3)));
+        assert_eq!(all, measured.occupied() + predicted.len());
+        assert!(eroded < kept && kept < all, "{eroded} < {kept} < {all}");
+        assert!(kept >= measured.occupied());
     }
 
     #[test]

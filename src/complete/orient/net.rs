@@ -147,7 +147,7 @@ impl Orienter {
         let config: OrienterConfig = read_declared(bytes, Network::Orienter)?;
         config.validate().map_err(WeightsError::InvalidOrienter)?;
         let mut net = OrienterNet::new(&config, &device);
-        apply(&mut net, bytes, None)?;
+        apply(&mut net, bytes)?;
         Ok(Orienter::new(net, config, device))
     }
 

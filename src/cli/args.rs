@@ -295,14 +295,16 @@ pub struct CompleteArgs {
     /// Let the network alone complete the far side.
     #[arg(long, overrides_with = "symmetry")]
     pub no_symmetry: bool,
-    /// Erosion element side for the inpainted views (pixels); 0 = off.
+    /// Erosion element side for the inpainted views (pixels); 0 = off. A model that keeps its
+    /// input's pixels (the built-in one) has them spared.
     #[arg(long, default_value_t = Options::default().erode)]
     pub erode: usize,
     /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
     #[arg(long, default_value_t = Options::default().smooth)]
     pub smooth: usize,
     /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray
-    /// at the predicted depth.
+    /// at the predicted depth (a model that keeps its input's pixels leaves those where they
+    /// were measured either way).
     #[arg(long)]
     pub no_snap: bool,
     #[command(flatten)]

@@ -18,6 +18,9 @@
 #   --size S          view side of the data and the model [128]
 #   --batch B         objects per step [16]
 #   --lr R            first-stage learning rate [5e-4]
+#   --losses gan|l1   the training losses: gan, train's defaults; l1, without the adversarial,
+#                     perceptual and style terms (the CPU legs 8-9 of docs/training.md found
+#                     they cost CD at 64²) [gan]
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
@@ -35,6 +38,7 @@ config=cpu
 size=128
 batch=16
 lr=5e-4
+losses=gan
 tiny=false
 while [ $# -gt 1 ]; do
     case $1 in
@@ -47,12 +51,18 @@ while [ $# -gt 1 ]; do
     --size) size=$2 ;;
     --batch) batch=$2 ;;
     --lr) lr=$2 ;;
+    --losses) losses=$2 ;;
     --tiny) tiny=true; shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
     esac
     shift 2
 done
 [ $# -eq 1 ] || { echo "usage: scripts/gpu-run.sh [options] OUT" >&2; exit 2; }
+case $losses in
+gan) loss_args=() ;;
+l1) loss_args=(--loss-adversarial 0 --loss-perceptual 0 --loss-style 0) ;;
+*) echo "error: --losses $losses: gan or l1" >&2; exit 2 ;;
+esac
 out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
@@ -188,9 +198,9 @@ $tiny && [ $left -lt 30 ] && left=30
 # SIGINT is train's Ctrl-C: it checkpoints, validates the last step and draws its samples.
 # timeout answers 124 when it sent the signal, whatever train then did; train's own status is
 # in its summary (train.json, "outcome": "interrupted").
-say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch --lr $lr ($left s)"
+say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch --lr $lr ${loss_args[*]} ($left s)"
 timeout -k 60 $((left + 60)) timeout -s INT "$left" "$mvpcc" train --data "$data" --out "$run" \
-    "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" --lr "$lr" \
+    "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" --lr "$lr" "${loss_args[@]}" \
     --val-every "$val_every" --val-samples 32 --checkpoint-every 500 --workers "$workers" \
     --json >"$out/train.json" 2>>"$log"
 status=$?

@@ -81,6 +81,26 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     assert!(has_png(&run.join("samples")), "no samples drawn");
 }
 
+/// A losses choice the script does not know is refused before anything runs.
+#[cfg(unix)]
+#[test]
+fn an_unknown_losses_choice_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = Command::new("bash")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .arg("scripts/gpu-run.sh")
+        .args(["--losses", "wgan"])
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&output.stderr),
+        "error: --losses wgan: gan or l1\n"
+    );
+    assert!(!dir.path().join("out").exists());
+}
+
 fn has_png(dir: &Path) -> bool {
     std::fs::read_dir(dir).is_ok_and(|mut d| {
         d.any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")))

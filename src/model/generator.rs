@@ -284,13 +284,16 @@ mod tests {
         }
     }
 
-    /// Where the input has a pixel the output is the input's, and certainly occupied;
-    /// elsewhere it is the prediction of the same weights without the copy.
+    /// A config asking for the copy builds it. Where the input has a pixel the output is the
+    /// input's, and certainly occupied; elsewhere it is the prediction of the same weights
+    /// without the copy.
     #[test]
     fn the_input_copy_keeps_the_inputs_pixels_and_changes_nothing_else() {
         let device = Device::flex();
         let plain = Preset::Tiny.config().with_views(1);
         let g = plain.init_generator(&device).unwrap();
+        let built = plain.clone().with_input_copy_kind(true);
+        assert!(built.init_generator(&device).unwrap().copy_input);
         let copying = Generator {
             copy_input: true,
             ..g.clone()

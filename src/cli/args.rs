@@ -299,7 +299,8 @@ pub struct CompleteArgs {
     /// input's pixels (the built-in one) has them spared.
     #[arg(long, default_value_t = Options::default().erode)]
     pub erode: usize,
-    /// Median window side over each inpainted view's XYZ before re-projection; 0 = off.
+    /// Median window side over each inpainted view's XYZ before re-projection; 0 = off. A
+    /// model that keeps its input's pixels (the built-in one) has them spared.
     #[arg(long, default_value_t = Options::default().smooth)]
     pub smooth: usize,
     /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray

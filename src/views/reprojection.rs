@@ -208,33 +208,26 @@ pub fn snap_to_rays(views: &mut ViewImages, cameras: &[Camera], measured: Option
 /// Occupied pixels (after erosion) of every view, as one de-duplicated cloud in normalized
 /// coordinates, with colour when the views carry it.
 pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
-    reproject_masked(views, options, |v| {
-        erode(views.view_occupancy(v), views.size, options.erode)
-    })
+    reproject_sparing(views, options, None)
 }
 
-/// [`reproject`] with the pixels `measured` has spared by the erosion. A generator that keeps
-/// its input's pixels (`ModelConfig::copies_input`) returns those exactly, so the rim the
-/// erosion is for is only the rim of what it completed.
+/// [`reproject`] with the pixels `measured` has spared by the erosion and the smoothing. A
+/// generator that keeps its input's pixels (`ModelConfig::copies_input`) returns those
+/// exactly, so the rim the erosion is for is only the rim of what it completed, and the median
+/// would only move measured points.
 pub fn reproject_keeping(
     views: &ViewImages,
     options: ReprojectOptions,
     measured: &ViewImages,
 ) -> PointCloud {
-    reproject_masked(views, options, |v| {
-        let mut mask = erode(views.view_occupancy(v), views.size, options.erode);
-        for (kept, &seen) in mask.iter_mut().zip(measured.view_occupancy(v)) {
-            *kept |= seen;
-        }
-        mask
-    })
+    reproject_sparing(views, options, Some(measured))
 }
 
-/// The pixels `mask_of(view)` of every view, as [`reproject`] collects them.
-fn reproject_masked(
+/// [`reproject`], the pixels occupied in `measured` left as they are.
+fn reproject_sparing(
     views: &ViewImages,
     options: ReprojectOptions,
-    mask_of: impl Fn(usize) -> Vec<bool> + Sync,
+    measured: Option<&ViewImages>,
 ) -> PointCloud {
     let size = views.size;
     let plane = size * size;
@@ -242,13 +235,18 @@ fn reproject_masked(
     let per_view: Vec<ViewPoints> = (0..views.views())
         .into_par_iter()
         .map(|v| {
-            let mask = mask_of(v);
+            let spared = measured.map(|m| m.view_occupancy(v));
+            let is_spared = |at: usize| spared.is_some_and(|s| s[at]);
+            let mut mask = erode(views.view_occupancy(v), size, options.erode);
+            let occupied = views.view_occupancy(v);
+            for (at, kept) in mask.iter_mut().enumerate() {
+                *kept |= is_spared(at) && occupied[at];
+            }
             let px = views.view_pixels(v);
             let mut positions = Vec::new();
             let mut colors = Vec::new();
-            let occupied = views.view_occupancy(v);
             for at in (0..plane).filter(|&at| mask[at]) {
-                positions.push(if options.smooth > 1 {
+                positions.push(if options.smooth > 1 && !is_spared(at) {
                     median_xyz(px, occupied, size, at, options.smooth)
                 } else {
                     [0, 1, 2].map(|c| px[c * plane + at] as f64)
@@ -399,6 +397,29 @@ mod tests {
         assert_eq!(all, measured.occupied() + predicted.len());
         assert!(eroded < kept && kept < all, "{eroded} < {kept} < {all}");
         assert!(kept >= measured.occupied());
+        // The median smoothing leaves the measured points where they are, too.
+        let seen: std::collections::HashSet<[u64; 3]> = (0..plane)
+            .filter(|&at| measured.occupancy[at])
+            .map(|at| [0, 1, 2].map(|c| (measured.pixels[c * plane + at] as f64).to_bits()))
+            .collect();
+        let smoothed = ReprojectOptions {
+            smooth: 3,
+            ..options(0)
+        };
+        // How many of the measured points the cloud holds exactly.
+        let exact = |cloud: PointCloud| {
+            let held: std::collections::HashSet<[u64; 3]> = cloud
+                .positions
+                .iter()
+                .map(|p| p.map(f64::to_bits))
+                .collect();
+            seen.intersection(&held).count()
+        };
+        assert_eq!(
+            exact(reproject_keeping(&completed, smoothed, &measured)),
+            seen.len()
+        );
+        assert!(exact(reproject(&completed, smoothed)) < seen.len());
     }
 
     #[test]

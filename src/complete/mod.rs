@@ -25,7 +25,7 @@ use crate::core::knn::KnnIndex;
 use crate::model::inpaint::{InpaintError, Inpainter};
 use crate::model::weights::WeightsError;
 use crate::views::projection::{project, ViewImages};
-use crate::views::reprojection::{reproject, reproject_keeping, snap_to_rays, ReprojectOptions};
+use crate::views::reprojection::{reproject_keeping, snap_to_rays, ReprojectOptions};
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use serde::Serialize;
@@ -512,10 +512,7 @@ fn run_network(
         smooth: options.smooth,
         ..ReprojectOptions::default()
     };
-    let predicted = match measured {
-        Some(measured) => reproject_keeping(&inpainted, reproject_options, measured),
-        None => reproject(&inpainted, reproject_options),
-    };
+    let predicted = reproject_keeping(&inpainted, reproject_options, measured);
     timings.reprojection = start.elapsed();
 
     let start = Instant::now();
@@ -689,6 +686,7 @@ mod tests {
     use crate::datagen::shapes::{example_car, scanned_side};
     use crate::model::weights::generator_to_bytes;
     use crate::model::{ModelConfig, Preset};
+    use crate::views::reprojection::reproject;
     use burn::tensor::Device;
 
     fn options(method: Method) -> Options {
@@ -789,7 +787,7 @@ mod tests {
         let kept = filtered(reproject_keeping(
             &inpainted,
             ReprojectOptions::default(),
-            &views,
+            Some(&views),
         ));
         let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
         assert_eq!(done.cloud.positions, expected);

@@ -9,7 +9,7 @@ use crate::core::camera::Camera;
 use crate::metrics::{compare_clouds, compare_images, ImageMetrics};
 use crate::model::inpaint::Inpainter;
 use crate::views::projection::ViewImages;
-use crate::views::reprojection::{reproject, reproject_keeping, ReprojectOptions};
+use crate::views::reprojection::{reproject_keeping, ReprojectOptions};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -143,10 +143,7 @@ fn score_cloud(points: &[[f64; 3]], gt: &[[f64; 3]]) -> Cloud3d {
 /// stay as the network predicts them: these scores end stages and pick the best checkpoint, and
 /// the recorded training recipe (README, *The default model*) was run with them so.
 pub fn completed_cloud(views: &ViewImages, measured: Option<&ViewImages>) -> Vec<[f64; 3]> {
-    let cloud = match measured {
-        Some(measured) => reproject_keeping(views, ReprojectOptions::default(), measured),
-        None => reproject(views, ReprojectOptions::default()),
-    };
+    let cloud = reproject_keeping(views, ReprojectOptions::default(), measured);
     let keep = inliers(&cloud.positions, SorParams::default());
     cloud
         .positions

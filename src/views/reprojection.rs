@@ -208,23 +208,14 @@ pub fn snap_to_rays(views: &mut ViewImages, cameras: &[Camera], measured: Option
 /// Occupied pixels (after erosion) of every view, as one de-duplicated cloud in normalized
 /// coordinates, with colour when the views carry it.
 pub fn reproject(views: &ViewImages, options: ReprojectOptions) -> PointCloud {
-    reproject_sparing(views, options, None)
+    reproject_keeping(views, options, None)
 }
 
-/// [`reproject`] with the pixels `measured` has spared by the erosion and the smoothing. A
-/// generator that keeps its input's pixels (`ModelConfig::copies_input`) returns those
-/// exactly, so the rim the erosion is for is only the rim of what it completed, and the median
-/// would only move measured points.
+/// [`reproject`] with the pixels occupied in `measured` spared by the erosion and the
+/// smoothing. A generator that keeps its input's pixels (`ModelConfig::copies_input`) returns
+/// those exactly, so the rim the erosion is for is only the rim of what it completed, and the
+/// median would only move measured points.
 pub fn reproject_keeping(
-    views: &ViewImages,
-    options: ReprojectOptions,
-    measured: &ViewImages,
-) -> PointCloud {
-    reproject_sparing(views, options, Some(measured))
-}
-
-/// [`reproject`], the pixels occupied in `measured` left as they are.
-fn reproject_sparing(
     views: &ViewImages,
     options: ReprojectOptions,
     measured: Option<&ViewImages>,
@@ -392,7 +383,7 @@ mod tests {
             smooth: 0,
         };
         let all = count(reproject(&completed, options(0)));
-        let kept = count(reproject_keeping(&completed, options(3), &measured));
+        let kept = count(reproject_keeping(&completed, options(3), Some(&measured)));
         let eroded = count(reproject(&completed, options(3)));
         assert_eq!(all, measured.occupied() + predicted.len());
         assert!(eroded < kept && kept < all, "{eroded} < {kept} < {all}");
@@ -416,7 +407,7 @@ mod tests {
             seen.intersection(&held).count()
         };
         assert_eq!(
-            exact(reproject_keeping(&completed, smoothed, &measured)),
+            exact(reproject_keeping(&completed, smoothed, Some(&measured))),
             seen.len()
         );
         assert!(exact(reproject(&completed, smoothed)) < seen.len());

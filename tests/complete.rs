@@ -235,6 +235,23 @@ fn the_built_in_model_completes_out_of_the_box() {
         &out.positions[..input_cloud.len()],
         &input_cloud.positions[..]
     );
+
+    // The built-in model's own threshold lies below one half: a stricter one adds less.
+    let strict = dir.path().join("strict.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&strict), "--occupancy", "0.9"])
+        .assert()
+        .success();
+    assert!(read_cloud(&strict, None).unwrap().cloud.len() < out.len());
+    let refused = dir.path().join("refused.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&refused), "--occupancy", "1.5"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "1.5 is not a probability between 0 and 1",
+        ));
+    assert!(!refused.exists());
 }
 
 #[test]

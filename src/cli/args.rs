@@ -248,6 +248,11 @@ pub struct CompleteArgs {
     /// built-in model].
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// Probability above which a pixel of the network's output becomes a point; lower adds
+    /// more of what the network is unsure of [default: the threshold saved with the model's
+    /// weights, chosen on validation; one half for weights saved without one].
+    #[arg(long, value_name = "P", value_parser = probability)]
+    pub occupancy: Option<f64>,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// Rig cameras of the model's views (those it was trained with).
@@ -737,6 +742,14 @@ pub struct TrainOrientArgs {
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
     #[arg(long, default_value_t = DEFAULT_CACHE_MB)]
     pub cache_mb: usize,
+}
+
+/// A probability strictly between 0 and 1.
+fn probability(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(p) if p > 0.0 && p < 1.0 => Ok(p),
+        _ => Err(format!("{text} is not a probability between 0 and 1")),
+    }
 }
 
 /// The training defaults, written once in the library.

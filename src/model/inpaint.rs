@@ -2,7 +2,7 @@
 //! ([`ViewImages`]) and the network ([`Generator`]).
 
 use crate::model::weights::{generator_from_bytes, WeightsError};
-use crate::model::{Channels, Generator, ModelConfig, NoProbe};
+use crate::model::{Channels, ConfigError, Generator, ModelConfig, NoProbe};
 use crate::views::projection::{ViewImages, CHANNELS};
 use burn::tensor::{Device, Tensor, TensorData};
 use std::time::{Duration, Instant};
@@ -114,8 +114,18 @@ impl Inpainter {
         &self.config
     }
 
+    /// The same weights with another occupancy threshold (a probability in (0, 1); see
+    /// [`ModelConfig::occupancy_threshold`]).
+    pub fn with_occupancy(mut self, threshold: f64) -> Result<Inpainter, ConfigError> {
+        let config = self.config.clone().with_occupancy(Some(threshold));
+        config.validate()?;
+        self.config = config;
+        Ok(self)
+    }
+
     /// Completes a batch of objects in one forward pass. Every pixel of the output comes from
-    /// the network: it is occupied where the predicted occupancy exceeds one half, and holds
+    /// the network: it is occupied where the predicted occupancy exceeds the config's
+    /// threshold ([`ModelConfig::occupancy_threshold`]), and holds
     /// the predicted geometry (and colour, for an XYZRGB model given coloured views).
     pub fn inpaint(&self, batch: &[ViewImages]) -> Result<Vec<ViewImages>, InpaintError> {
         self.inpaint_timed(batch).map(|(views, _)| views)
@@ -202,6 +212,7 @@ impl Inpainter {
         let (v, s) = (self.config.views, self.config.size);
         let c = self.config.channels.count();
         let plane = s * s;
+        let cut = self.config.occupancy_logit();
         batch
             .iter()
             .enumerate()
@@ -216,7 +227,7 @@ impl Inpainter {
                         &mut out.pixels[view * CHANNELS * plane..(view + 1) * CHANNELS * plane];
                     let occ = &mut out.occupancy[view * plane..(view + 1) * plane];
                     for at in 0..plane {
-                        if logit[at] <= 0.0 {
+                        if logit[at] <= cut {
                             continue;
                         }
                         occ[at] = true;
@@ -274,6 +285,48 @@ mod tests {
         }
         // The same object twice in one batch comes out the same.
         assert_eq!(out[0].pixels, out[1].pixels);
+    }
+
+    #[test]
+    fn a_lower_occupancy_threshold_adds_pixels_and_moves_none() {
+        let device = Device::flex();
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(&device).unwrap();
+        let bytes = generator_to_bytes(&g, &config).unwrap();
+        let views = example_car_views(32);
+        let inpainter = || Inpainter::from_bytes(&bytes, device.clone()).unwrap();
+        let at = |p: f64| {
+            let tuned = inpainter().with_occupancy(p).unwrap();
+            tuned
+                .inpaint(std::slice::from_ref(&views))
+                .unwrap()
+                .remove(0)
+        };
+        let half = inpainter()
+            .inpaint(std::slice::from_ref(&views))
+            .unwrap()
+            .remove(0);
+        assert_eq!(at(0.5), half);
+        let (low, high) = (at(0.01), at(0.99));
+        let count = |v: &ViewImages| v.occupancy.iter().filter(|&&o| o).count();
+        assert!(count(&low) > count(&high));
+        let plane = 32 * 32;
+        for (fewer, more) in [(&high, &half), (&half, &low)] {
+            for (at, _) in fewer.occupancy.iter().enumerate().filter(|(_, &o)| o) {
+                assert!(more.occupancy[at]);
+                let (v, i) = (at / plane, at % plane);
+                for ch in 0..3 {
+                    let k = (v * CHANNELS + ch) * plane + i;
+                    assert_eq!(fewer.pixels[k], more.pixels[k]);
+                }
+            }
+        }
+        for p in [0.0, 1.0, f64::NAN] {
+            assert!(matches!(
+                inpainter().with_occupancy(p),
+                Err(ConfigError::Occupancy(_))
+            ));
+        }
     }
 
     #[test]

@@ -97,6 +97,10 @@ pub struct ModelConfig {
     /// `Some(true)`: the output keeps the input's pixels (see [`ModelConfig::copies_input`]);
     /// `None` in every weights file written before the choice existed.
     pub input_copy: Option<bool>,
+    /// Probability above which an output pixel is occupied (becomes a point), chosen on the
+    /// validation split for these weights; `None` is one half, as in every weights file
+    /// written before the choice existed (see [`ModelConfig::occupancy_threshold`]).
+    pub occupancy: Option<f64>,
 }
 
 /// Named model shapes; `mvpcc profile` and `mvpcc train` take these names.
@@ -143,6 +147,8 @@ pub enum ConfigError {
     DiscWidth(usize),
     #[error("views {0} must be at least 1")]
     Views(usize),
+    #[error("occupancy threshold {0} is not a probability between 0 and 1")]
+    Occupancy(f64),
     #[error("{field} {value} is above the largest this build accepts ({limit})")]
     TooLarge {
         field: &'static str,
@@ -177,6 +183,9 @@ impl ModelConfig {
         }
         if self.views == 0 {
             return Err(ConfigError::Views(self.views));
+        }
+        if let Some(p) = self.occupancy.filter(|p| !(*p > 0.0 && *p < 1.0)) {
+            return Err(ConfigError::Occupancy(p));
         }
         let values = [
             self.width,
@@ -221,6 +230,22 @@ impl ModelConfig {
     /// that predate it.
     pub fn with_input_copy_kind(self, copy: bool) -> ModelConfig {
         self.with_input_copy(copy.then_some(true))
+    }
+
+    /// Probability above which an output pixel is occupied. The occupancy plane is trained
+    /// with BCE against whole objects, and a network that cannot place a pixel exactly still
+    /// gives the pixels of a gap it fills a small probability: a threshold below one half
+    /// keeps them, and with them points in the gaps the mean squared distance counts most
+    /// (docs/training.md, *The occupancy threshold*).
+    pub fn occupancy_threshold(&self) -> f64 {
+        self.occupancy.unwrap_or(0.5)
+    }
+
+    /// The logit [`Self::occupancy_threshold`] corresponds to: a pixel is occupied where the
+    /// generator's occupancy logit exceeds it.
+    pub fn occupancy_logit(&self) -> f32 {
+        let p = self.occupancy_threshold();
+        (p / (1.0 - p)).ln() as f32
     }
 
     /// Image planes per view the generator reads: the channels plus the occupancy mask.

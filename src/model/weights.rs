@@ -259,12 +259,14 @@ fn network_for<M: Module>(
 }
 
 /// Whether weights made for `found` fit a network built from `expected`: every field equal but
-/// the image size and the input copy, which change no weight ([`ModelConfig::copies_input`]).
+/// the image size, the input copy and the occupancy threshold, which change no weight
+/// ([`ModelConfig::copies_input`], [`ModelConfig::occupancy_threshold`]).
 pub fn compatible(found: &ModelConfig, expected: &ModelConfig) -> Result<(), WeightsError> {
     let fitted = found
         .clone()
         .with_size(expected.size)
-        .with_input_copy(expected.input_copy);
+        .with_input_copy(expected.input_copy)
+        .with_occupancy(expected.occupancy);
     if fitted == *expected {
         return Ok(());
     }
@@ -374,6 +376,23 @@ mod tests {
             back.forward(x.clone()).images.into_data(),
             plain_again.forward(x).images.into_data()
         );
+    }
+
+    #[test]
+    fn the_occupancy_threshold_travels_with_the_weights_and_changes_none() {
+        let device = Device::flex();
+        let plain = Preset::Tiny.config();
+        let tuned = plain.clone().with_occupancy(Some(0.05));
+        let g = plain.init_generator(&device).unwrap();
+        let bytes = generator_to_bytes(&g, &tuned).unwrap();
+        let (_, config) = generator_from_bytes(&bytes, &device).unwrap();
+        assert_eq!(config.occupancy_threshold(), 0.05);
+        assert!(generator_for(&bytes, &plain, &device).is_ok());
+        let wider = plain.with_width(16);
+        assert!(matches!(
+            generator_for(&bytes, &wider, &device),
+            Err(WeightsError::ConfigMismatch { .. })
+        ));
     }
 
     #[test]

@@ -26,7 +26,13 @@ use std::time::Instant;
 
 pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     let inpainter = match args.method {
-        Method::Network => Some(load_model(args.model.as_deref(), args.device, log)?),
+        Method::Network => {
+            let inpainter = load_model(args.model.as_deref(), args.device, log)?;
+            Some(match args.occupancy {
+                Some(p) => inpainter.with_occupancy(p)?,
+                None => inpainter,
+            })
+        }
         Method::Identity | Method::Mirror => None,
     };
     let orienter = if orient_mode(&args).needs_network() {

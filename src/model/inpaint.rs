@@ -254,12 +254,17 @@ mod tests {
     use crate::model::weights::generator_to_bytes;
     use crate::model::Preset;
 
+    /// A freshly initialized tiny generator's weights file.
+    fn tiny_weights(device: &Device) -> Vec<u8> {
+        let config = Preset::Tiny.config();
+        let g = config.init_generator(device).unwrap();
+        generator_to_bytes(&g, &config).unwrap()
+    }
+
     #[test]
     fn views_in_views_out_with_valid_geometry() {
         let device = Device::flex();
-        let config = Preset::Tiny.config();
-        let g = config.init_generator(&device).unwrap();
-        let bytes = generator_to_bytes(&g, &config).unwrap();
+        let bytes = tiny_weights(&device);
         let inpainter = Inpainter::from_bytes(&bytes, device).unwrap();
         let views = example_car_views(32);
         let out = inpainter.inpaint(&[views.clone(), views.clone()]).unwrap();
@@ -290,9 +295,7 @@ mod tests {
     #[test]
     fn a_lower_occupancy_threshold_adds_pixels_and_moves_none() {
         let device = Device::flex();
-        let config = Preset::Tiny.config();
-        let g = config.init_generator(&device).unwrap();
-        let bytes = generator_to_bytes(&g, &config).unwrap();
+        let bytes = tiny_weights(&device);
         let views = example_car_views(32);
         let inpainter = || Inpainter::from_bytes(&bytes, device.clone()).unwrap();
         let at = |p: f64| {

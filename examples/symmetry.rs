@@ -3,7 +3,9 @@
 //! estimated, as `mvpcc complete --method mirror` does), the estimated plane is compared with
 //! the true one (the generated objects are symmetric about x = 0 of their own frame), and the
 //! mirror completion is scored next to the mirror about the true plane, by partial kind,
-//! category and how the plane was found (`fit`).
+//! category and how the plane was found (`fit`). With `--true-width` every partial is
+//! completed as `complete --vehicle-width W` would with its object's true width (the ground
+//! truth's x extent), which measures what knowing the width is worth.
 //!
 //! Real scans given with `--mls DIR` (PCD, y up) are completed the same way, as they are and
 //! turned by five random headings: the plane's fit, the far side's measured extent against
@@ -11,8 +13,8 @@
 //! mirror image, so the plane sits too near the scanned side), and how far the planes found
 //! on the turned scans, turned back, lie from the plane of the scan as it is.
 //!
-//! `cargo run --release --example symmetry -- --data DATA [--limit N] [--json FILE]
-//! [--mls DIR] [--seed N]`
+//! `cargo run --release --example symmetry -- --data DATA [--true-width] [--limit N]
+//! [--json FILE] [--mls DIR] [--seed N]`
 //!
 //! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset;
 //! small gains are checked on three more seeds, docs/completing.md); the test split is measured
@@ -67,12 +69,17 @@ struct Sample {
 }
 
 /// `complete --method mirror` with everything estimated.
-fn mirrored(completer: &Completer, cloud: &PointCloud) -> Result<Completion, Error> {
+fn mirrored(
+    completer: &Completer,
+    cloud: &PointCloud,
+    vehicle_width: Option<f64>,
+) -> Result<Completion, Error> {
     let settings = Settings {
         clean: false,
         orient: OrientMode::Auto,
         options: Options {
             method: Method::Mirror,
+            vehicle_width,
             ..Options::default()
         },
     };
@@ -108,9 +115,12 @@ fn measure(
     partial: &Path,
     gt: &[[f64; 3]],
     spec: &PartialSpec,
+    given_width: bool,
 ) -> Result<Sample, Error> {
     let cloud = read_cloud(partial, None)?.cloud;
-    let completion = mirrored(completer, &cloud)?;
+    let bounds = Aabb::of(gt).ok_or("empty ground truth")?;
+    let width = given_width.then(|| bounds.max[0] - bounds.min[0]);
+    let completion = mirrored(completer, &cloud, width)?;
     let measured: Vec<[f64; 3]> = cloud
         .positions
         .iter()
@@ -122,7 +132,6 @@ fn measure(
         .iter()
         .map(|&p| to_object(spec, p))
         .collect();
-    let bounds = Aabb::of(gt).ok_or("empty ground truth")?;
     let length = bounds.longest_side();
     let (offset, angle, towards_scanner) = match completion.plane {
         Some(plane) => {
@@ -223,7 +232,7 @@ struct FoundPlane {
 }
 
 fn plane_of(completer: &Completer, cloud: &PointCloud) -> Result<Option<FoundPlane>, Error> {
-    let done = mirrored(completer, cloud)?;
+    let done = mirrored(completer, cloud, None)?;
     let Some(plane) = done.plane else {
         return Ok(None);
     };
@@ -308,6 +317,7 @@ fn main() -> Result<(), Error> {
         return real_scans(&completer, &dir, seed);
     }
     let data = PathBuf::from(arg("--data").ok_or("--data DIR is required")?);
+    let given_width = std::env::args().any(|a| a == "--true-width");
     let limit: usize = arg("--limit").map_or(Ok(usize::MAX), |l| l.parse())?;
     let manifest: Manifest =
         serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json"))?)?;
@@ -328,7 +338,7 @@ fn main() -> Result<(), Error> {
             let partial = clouds.join(format!("partial_{}.ply", sample.k));
             let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
             let names = (name, model.category.clone());
-            measure(&completer, names, &partial, &gt, &sample.spec)
+            measure(&completer, names, &partial, &gt, &sample.spec, given_width)
         })
         .collect::<Result<_, Error>>()?;
 

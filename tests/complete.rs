@@ -218,6 +218,57 @@ fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
     assert!(overshoot(&unsnapped.positions, &input_cloud.positions) < 2.2);
 }
 
+/// `--vehicle-width`: the plane of a one-sided scan is kept half the width from the scanned
+/// flank, so a car said to be 2.4 m wide has its far flank drawn 2.4 m from the near one
+/// (the car itself is 1.8 m wide); refused when not a positive length.
+#[test]
+fn a_known_width_puts_the_far_flank_that_far_from_the_near_one() {
+    let dir = TempDir::new().unwrap();
+    // One flank and the near part of the roof, as a scan of a vehicle taller than the
+    // scanner sees it.
+    let mut input_cloud = scan(5);
+    let keep: Vec<bool> = input_cloud
+        .positions
+        .iter()
+        .map(|p| p[0] - 650_123.25 > 0.3)
+        .collect();
+    input_cloud = input_cloud.filter(&keep);
+    let input = write(&dir, "scan.ply", &input_cloud);
+    let output = dir.path().join("wide.ply");
+    let assert = mvpcc()
+        .args(["complete", s(&input), s(&output), "--method", "mirror"])
+        .args(["--vehicle-width", "2.4", "--json"])
+        .assert()
+        .success();
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    assert_eq!(report["symmetry_plane"]["fit"], "width", "{report}");
+    let out = read_cloud(&output, None).unwrap().cloud;
+    let across = |p: &[f64; 3]| p[0] - 650_123.25;
+    let near = input_cloud
+        .positions
+        .iter()
+        .map(across)
+        .fold(f64::MIN, f64::max);
+    let far = out.positions.iter().map(across).fold(f64::MAX, f64::min);
+    assert!(
+        (near - far - 2.4).abs() < 0.02,
+        "near flank {near} m, far {far} m"
+    );
+
+    for width in ["0", "-1", "wide"] {
+        let refused = dir.path().join(format!("refused{width}.ply"));
+        mvpcc()
+            .args(["complete", s(&input), s(&refused), "--method", "mirror"])
+            .args(["--vehicle-width", width])
+            .assert()
+            .failure()
+            .stderr(predicates::str::contains(format!(
+                "{width} is not a positive length"
+            )));
+        assert!(!refused.exists());
+    }
+}
+
 #[test]
 fn the_built_in_model_completes_out_of_the_box() {
     let dir = TempDir::new().unwrap();

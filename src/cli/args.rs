@@ -300,6 +300,17 @@ pub struct CompleteArgs {
     /// Let the network alone complete the far side.
     #[arg(long, overrides_with = "symmetry")]
     pub no_symmetry: bool,
+    /// The vehicle's width in the input's units, when known (buses and lorries: 2.55 m in the
+    /// EU): on a scan of one side the symmetry plane is kept at least half of it from the
+    /// scanned flank, so the mirrored far flank is not drawn inside the vehicle.
+    #[arg(
+        long,
+        value_name = "W",
+        value_parser = positive_length,
+        allow_negative_numbers = true,
+        conflicts_with = "paper"
+    )]
+    pub vehicle_width: Option<f64>,
     /// Erosion element side for the inpainted views (pixels); 0 = off. A model that keeps its
     /// input's pixels (the built-in one) has them spared.
     #[arg(long, default_value_t = Options::default().erode)]
@@ -749,6 +760,13 @@ fn probability(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(p) if p > 0.0 && p < 1.0 => Ok(p),
         _ => Err(format!("{text} is not a probability between 0 and 1")),
+    }
+}
+
+fn positive_length(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(w) if w.is_finite() && w > 0.0 => Ok(w),
+        _ => Err(format!("{text} is not a positive length")),
     }
 }
 

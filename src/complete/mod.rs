@@ -17,7 +17,7 @@ pub mod symmetry;
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::{inliers, SorParams};
 use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
-use crate::complete::symmetry::{find_plane, mirror, Plane};
+use crate::complete::symmetry::{find_plane, mirror, with_width, Plane};
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
@@ -81,6 +81,9 @@ pub struct Options {
     pub symmetric_frame: bool,
     /// Return the network's input and output views in the [`Completion`].
     pub keep_views: bool,
+    /// The vehicle's width in the input's units, when the user knows it: a scan of one side
+    /// then has its plane half of it from the scanned flank ([`with_width`]).
+    pub vehicle_width: Option<f64>,
 }
 
 impl Options {
@@ -117,6 +120,7 @@ impl Default for Options {
             symmetry: true,
             symmetric_frame: true,
             keep_views: false,
+            vehicle_width: None,
         }
     }
 }
@@ -423,7 +427,15 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
     let wants_plane = options.symmetric_frame
         || options.method == Method::Mirror
         || (options.method == Method::Network && options.symmetry);
-    let plane = wants_plane.then(|| find_plane(&fitted_points)).flatten();
+    let plane = if wants_plane {
+        let found = find_plane(&fitted_points);
+        match options.vehicle_width {
+            Some(width) => with_width(&fitted_points, width / fitted.extent, found),
+            None => found,
+        }
+    } else {
+        None
+    };
     let frame = if options.symmetric_frame {
         symmetric_frame(&fitted, &fitted_points, plane)
     } else {

@@ -143,6 +143,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         symmetry: !args.no_symmetry,
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),
+        vehicle_width: args.vehicle_width,
     }
 }
 

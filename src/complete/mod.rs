@@ -81,8 +81,8 @@ pub struct Options {
     pub symmetric_frame: bool,
     /// Return the network's input and output views in the [`Completion`].
     pub keep_views: bool,
-    /// The vehicle's width in the input's units, when the user knows it: a scan of one side
-    /// then has its plane half of it from the scanned flank ([`with_width`]).
+    /// The vehicle's width in the input's units, when the user knows it: the plane of a scan
+    /// of one side is then kept at least half of it from the scanned flank ([`with_width`]).
     pub vehicle_width: Option<f64>,
 }
 

@@ -63,7 +63,8 @@ pub enum PlaneFit {
     /// Held back at the middle of the slice seen widest on both sides: the pairs put it
     /// beyond, towards the better scanned side.
     HeldBack,
-    /// Half the vehicle's given width from the scanned flank ([`with_width`]).
+    /// Half the vehicle's given width from the scanned flank: the plane found lay nearer it,
+    /// or none was found ([`with_width`]).
     Width,
 }
 
@@ -244,12 +245,12 @@ const FLANK_SEEN: f64 = 0.8;
 /// (normalized units): no nearer the scanned flank than half the width, so the mirrored far
 /// flank lies at least as far out as the vehicle's width puts it, unless the flank lies under
 /// [`FLANK_SEEN`] of that from the plane (its widest part is then not seen); where no plane
-/// was found, half the width from that flank. The flank is the outermost point of the scanned side over the
-/// horizontal slices of [`SLICE_POINTS`] points or more. The width bounds the plane only on
-/// that side: where the heading is off by a fraction of a degree, the ends of a long vehicle
-/// stick out past its flank, and setting every plane at half the width from that outermost
-/// point moved good planes by 0.6 % of the length (validation split, docs/completing.md).
-/// Clouds seen from both sides keep `plane` as found.
+/// was found, half the width from that flank. The flank is the outermost point of the scanned
+/// side over the horizontal slices of [`SLICE_POINTS`] points or more. The width bounds the
+/// plane only on that side: where the heading is off by a fraction of a degree, the ends of a
+/// long vehicle stick out past its flank, and setting every plane at half the width from that
+/// outermost point moved good planes by 0.6 % of the length (validation split,
+/// docs/completing.md). Clouds seen from both sides keep `plane` as found.
 pub fn with_width(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
     let (side, near_share) = scanned_side(points, &bounds);
@@ -261,12 +262,19 @@ pub fn with_width(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Opti
     match plane {
         Some(p) if (p.offset - bound) * side <= 0.0 => Some(p),
         Some(p) if flank - p.offset * side < FLANK_SEEN * width / 2.0 => Some(p),
-        found => Some(Plane {
-            offset: bound,
-            support: found.map_or(0.0, |p| p.support),
-            tolerance: found.map_or(MATCH, |p| p.tolerance),
-            fit: PlaneFit::Width,
-        }),
+        _ => {
+            let across = bounds.max[0] - bounds.min[0];
+            let Some(sample) = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across))
+            else {
+                return plane;
+            };
+            Some(Plane {
+                offset: bound,
+                support: sample.support([1.0, 0.0], bound),
+                tolerance: sample.tolerance,
+                fit: PlaneFit::Width,
+            })
+        }
     }
 }
 
@@ -739,7 +747,10 @@ mod tests {
         let widened = with_width(&points, 0.4, Some(at(0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
         assert_eq!(widened.fit, PlaneFit::Width);
-        assert_eq!(widened.support, 0.3);
+        assert!(
+            widened.support > 0.0 && widened.tolerance > 0.0,
+            "{widened:?}"
+        );
         assert_eq!(
             with_width(&points, 0.4, Some(at(0.06))),
             Some(at(0.06)),

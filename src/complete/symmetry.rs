@@ -241,15 +241,15 @@ fn scanned_side(points: &[[f64; 3]], bounds: &Aabb) -> (f64, f64) {
 /// 0, 0.8 and 0.9 (docs/completing.md).
 const FLANK_SEEN: f64 = 0.8;
 
-/// The plane of a scan seen from one side ([`ONE_SIDED`]) whose vehicle is `width` wide
-/// (normalized units): no nearer the scanned flank than half the width, so the mirrored far
-/// flank lies at least as far out as the vehicle's width puts it, unless the flank lies under
-/// [`FLANK_SEEN`] of that from the plane (its widest part is then not seen); where no plane
-/// was found, half the width from that flank. The flank is the outermost point of the scanned
-/// side over the horizontal slices of [`SLICE_POINTS`] points or more. The width bounds the
-/// plane only on that side: where the heading is off by a fraction of a degree, the ends of a
-/// long vehicle stick out past its flank, and setting every plane at half the width from that
-/// outermost point moved good planes by 0.6 % of the length (validation split,
+/// The plane of a scan seen from one side (`ONE_SIDED`, as for the slices' bound) whose
+/// vehicle is `width` wide (normalized units): no nearer the scanned flank than half the width,
+/// so the mirrored far flank lies at least as far out as the vehicle's width puts it, unless
+/// the flank lies under `FLANK_SEEN` of that from the plane (its widest part is then not seen);
+/// where no plane was found, half the width from that flank. The flank is the outermost point
+/// of the scanned side over the horizontal slices of `SLICE_POINTS` points or more. The width
+/// bounds the plane only on that side: where the heading is off by a fraction of a degree, the
+/// ends of a long vehicle stick out past its flank, and setting every plane at half the width
+/// from that outermost point moved good planes by 0.6 % of the length (validation split,
 /// docs/completing.md). Clouds seen from both sides keep `plane` as found.
 pub fn with_width(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;

@@ -197,9 +197,12 @@ $tiny && [ $left -lt 30 ] && left=30
 [ $left -gt 10 ] || { say "no time left to train"; exit 1; }
 # SIGINT is train's Ctrl-C: it checkpoints, validates the last step and draws its samples.
 # timeout answers 124 when it sent the signal, whatever train then did; train's own status is
-# in its summary (train.json, "outcome": "interrupted").
+# in its summary (train.json, "outcome": "interrupted"). --foreground: without it timeout
+# sends the signal to train and then to its whole process group, train among them, and a
+# second SIGINT makes train exit at once, writing nothing (a CI run on a loaded machine lost
+# its train.json so).
 say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch --lr $lr ${loss_args[*]} ($left s)"
-timeout -k 60 $((left + 60)) timeout -s INT "$left" "$mvpcc" train --data "$data" --out "$run" \
+timeout -k 60 $((left + 60)) timeout --foreground -s INT "$left" "$mvpcc" train --data "$data" --out "$run" \
     "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" --lr "$lr" "${loss_args[@]}" \
     --val-every "$val_every" --val-samples 32 --checkpoint-every 500 --workers "$workers" \
     --json >"$out/train.json" 2>>"$log"

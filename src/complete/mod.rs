@@ -17,7 +17,7 @@ pub mod symmetry;
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::{inliers, SorParams};
 use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
-use crate::complete::symmetry::{find_plane, mirror, with_width, Plane};
+use crate::complete::symmetry::{find_plane, mirror, Plane};
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
@@ -82,7 +82,7 @@ pub struct Options {
     /// Return the network's input and output views in the [`Completion`].
     pub keep_views: bool,
     /// The vehicle's width in the input's units, when the user knows it: the plane of a scan
-    /// of one side is then kept at least half of it from the scanned flank ([`with_width`]).
+    /// of one side is then kept at least half of it from the scanned flank (see [`find_plane`]).
     pub vehicle_width: Option<f64>,
 }
 
@@ -427,15 +427,10 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
     let wants_plane = options.symmetric_frame
         || options.method == Method::Mirror
         || (options.method == Method::Network && options.symmetry);
-    let plane = if wants_plane {
-        let found = find_plane(&fitted_points);
-        match options.vehicle_width {
-            Some(width) => with_width(&fitted_points, width / fitted.extent, found),
-            None => found,
-        }
-    } else {
-        None
-    };
+    let width = options.vehicle_width.map(|w| w / fitted.extent);
+    let plane = wants_plane
+        .then(|| find_plane(&fitted_points, width))
+        .flatten();
     let frame = if options.symmetric_frame {
         symmetric_frame(&fitted, &fitted_points, plane)
     } else {

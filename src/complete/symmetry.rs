@@ -86,12 +86,14 @@ pub enum PlaneFit {
 ///    been scanned: the plane is held back at the tightest such middle (`slices_middle`).
 ///
 /// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
-/// to 0.699, most of it on the 27 % of partials that had no plane before. `None` only when
-/// neither support nor pairs show any symmetry (for example, one flat side).
-pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
+/// to 0.699, most of it on the 27 % of partials that had no plane before. Given the vehicle's
+/// `width` (normalized units), a scan of one side has its plane kept at least half of it from
+/// the scanned flank ([`with_width`]). `None` only when neither support nor pairs show any
+/// symmetry (for example, one flat side) and no width places a plane.
+pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
-    let width = bounds.max[0] - bounds.min[0];
-    let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * width))?;
+    let across = bounds.max[0] - bounds.min[0];
+    let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across))?;
     let (best, support) = sample.best_offset([1.0, 0.0]);
     let supported = support >= MIN_SCORE;
     let start = if supported { best } else { bounds.center()[0] };
@@ -101,24 +103,25 @@ pub fn find_plane(points: &[[f64; 3]]) -> Option<Plane> {
     let pulled = sample
         .refine_offset(start, &normals, true)
         .or_else(|| sample.refine_offset(start, &normals, false));
-    let (refined, fit) = match pulled {
-        Some(c) if supported => (c, PlaneFit::Refined),
-        Some(c) => (c, PlaneFit::Pairs),
-        None if supported => (best, PlaneFit::Supported),
-        None => return None,
-    };
-    let offset = held_back(points, &bounds, refined);
-    let fit = if offset == refined {
-        fit
-    } else {
-        PlaneFit::HeldBack
-    };
-    Some(Plane {
-        offset,
-        support: sample.support([1.0, 0.0], offset),
-        tolerance: sample.tolerance,
-        fit,
-    })
+    let found = match pulled {
+        Some(c) if supported => Some((c, PlaneFit::Refined)),
+        Some(c) => Some((c, PlaneFit::Pairs)),
+        None if supported => Some((best, PlaneFit::Supported)),
+        None => None,
+    }
+    .map(|(refined, fit)| {
+        let offset = held_back(points, &bounds, refined);
+        let fit = if offset == refined {
+            fit
+        } else {
+            PlaneFit::HeldBack
+        };
+        sample.plane(offset, fit)
+    });
+    match width {
+        Some(width) => with_width(points, &bounds, &sample, width, found),
+        None => found,
+    }
 }
 
 /// Height of the slices [`held_back`] bounds the plane in, over the object's length.
@@ -250,31 +253,27 @@ const FLANK_SEEN: f64 = 0.8;
 /// bounds the plane only on that side: where the heading is off by a fraction of a degree, the
 /// ends of a long vehicle stick out past its flank, and setting every plane at half the width
 /// from that outermost point moved good planes by 0.6 % of the length (validation split,
-/// docs/completing.md). Clouds seen from both sides keep `plane` as found.
-pub fn with_width(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
-    let bounds = Aabb::of(points)?;
-    let (side, near_share) = scanned_side(points, &bounds);
+/// docs/completing.md). Clouds seen from both sides keep `plane` as found. `bounds` is the
+/// points' box, `sample` [`find_plane`]'s.
+fn with_width(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    sample: &Sample,
+    width: f64,
+    plane: Option<Plane>,
+) -> Option<Plane> {
+    let (side, near_share) = scanned_side(points, bounds);
     if near_share < ONE_SIDED {
         return plane;
     }
-    let flank = scanned_flank(points, &bounds, side)?;
+    let Some(flank) = scanned_flank(points, bounds, side) else {
+        return plane;
+    };
     let bound = side * (flank - width / 2.0);
     match plane {
         Some(p) if (p.offset - bound) * side <= 0.0 => Some(p),
         Some(p) if flank - p.offset * side < FLANK_SEEN * width / 2.0 => Some(p),
-        _ => {
-            let across = bounds.max[0] - bounds.min[0];
-            let Some(sample) = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across))
-            else {
-                return plane;
-            };
-            Some(Plane {
-                offset: bound,
-                support: sample.support([1.0, 0.0], bound),
-                tolerance: sample.tolerance,
-                fit: PlaneFit::Width,
-            })
-        }
+        _ => Some(sample.plane(bound, PlaneFit::Width)),
     }
 }
 
@@ -479,6 +478,16 @@ impl Sample {
             }
         }
         Some(c)
+    }
+
+    /// The plane `x = c` with its support and this sample's match tolerance.
+    fn plane(&self, c: f64, fit: PlaneFit) -> Plane {
+        Plane {
+            offset: c,
+            support: self.support([1.0, 0.0], c),
+            tolerance: self.tolerance,
+            fit,
+        }
     }
 
     /// Fraction of the sample whose mirror image across the vertical plane `p·n = c` lands on
@@ -694,7 +703,7 @@ mod tests {
     /// `side` (sensor 0.45 above the object's lowest point, 0.8 beside its centre); the
     /// object's own plane is x = 0.
     fn drive_by_plane(category: Category, seed: u64, side: f32) -> Option<Plane> {
-        find_plane(&driven_past(category, seed, side, 0.45))
+        find_plane(&driven_past(category, seed, side, 0.45), None)
     }
 
     /// A cross-section's (x, y) points repeated along the length, 50 times 0.01 apart.
@@ -729,6 +738,14 @@ mod tests {
         );
     }
 
+    /// [`with_width`] with the box and the sample [`find_plane`] gives it.
+    fn widen(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
+        let bounds = Aabb::of(points).unwrap();
+        let across = bounds.max[0] - bounds.min[0];
+        let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across)).unwrap();
+        with_width(points, &bounds, &sample, width, plane)
+    }
+
     #[test]
     fn a_known_width_keeps_the_plane_half_of_it_from_the_scanned_flank() {
         // A near flank at x = 0.2 and a roof seen only to x = -0.05 (a tall vehicle driven
@@ -744,7 +761,7 @@ mod tests {
             tolerance: 0.01,
             fit: PlaneFit::HeldBack,
         };
-        let widened = with_width(&points, 0.4, Some(at(0.03))).unwrap();
+        let widened = widen(&points, 0.4, Some(at(0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
         assert_eq!(widened.fit, PlaneFit::Width);
         assert!(
@@ -752,27 +769,27 @@ mod tests {
             "{widened:?}"
         );
         assert_eq!(
-            with_width(&points, 0.4, Some(at(0.06))),
+            widen(&points, 0.4, Some(at(0.06))),
             Some(at(0.06)),
             "the flank 0.7 of the half-width from the plane: its widest part not seen, kept"
         );
         assert_eq!(
-            with_width(&points, 0.4, Some(at(-0.01))),
+            widen(&points, 0.4, Some(at(-0.01))),
             Some(at(-0.01)),
             "farther from the flank than half the width: kept"
         );
-        let placed = with_width(&points, 0.4, None).unwrap();
+        let placed = widen(&points, 0.4, None).unwrap();
         assert!(placed.offset.abs() < 1e-12 && placed.fit == PlaneFit::Width);
 
         // Scanned from the other side.
         let flipped: Vec<[f64; 3]> = points.iter().map(|&p| mirror(p, 0.0)).collect();
-        let widened = with_width(&flipped, 0.4, Some(at(-0.03))).unwrap();
+        let widened = widen(&flipped, 0.4, Some(at(-0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
 
         // Seen from both sides, the points say where the plane is.
         let both: Vec<[f64; 3]> = points.iter().chain(&flipped).copied().collect();
-        assert_eq!(with_width(&both, 0.6, Some(at(0.01))), Some(at(0.01)));
-        assert_eq!(with_width(&both, 0.6, None), None);
+        assert_eq!(widen(&both, 0.6, Some(at(0.01))), Some(at(0.01)));
+        assert_eq!(widen(&both, 0.6, None), None);
     }
 
     #[test]
@@ -848,7 +865,7 @@ mod tests {
                 .iter()
                 .map(|p| [p[0] / 4.4 + shift, p[1] / 4.4, p[2] / 4.4])
                 .collect();
-            let plane = find_plane(&points).expect("a car scan is symmetric");
+            let plane = find_plane(&points, None).expect("a car scan is symmetric");
             assert!(
                 (plane.offset - shift).abs() < 0.01,
                 "plane at {} for a car centred at {shift}",
@@ -863,7 +880,7 @@ mod tests {
         let wall: Vec<[f64; 3]> = (0..2000)
             .map(|i| [0.2, (i / 50) as f64 * 0.01, (i % 50) as f64 * 0.01])
             .collect();
-        assert_eq!(find_plane(&wall), None);
+        assert_eq!(find_plane(&wall, None), None);
     }
 
     #[test]

@@ -64,7 +64,7 @@ pub enum PlaneFit {
     /// beyond, towards the better scanned side.
     HeldBack,
     /// Half the vehicle's given width from the scanned flank: the plane found lay nearer it,
-    /// or none was found ([`with_width`]).
+    /// or none was found (see [`find_plane`]).
     Width,
 }
 
@@ -88,7 +88,7 @@ pub enum PlaneFit {
 /// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
 /// to 0.699, most of it on the 27 % of partials that had no plane before. Given the vehicle's
 /// `width` (normalized units), a scan of one side has its plane kept at least half of it from
-/// the scanned flank ([`with_width`]). `None` only when neither support nor pairs show any
+/// the scanned flank (`with_width`). `None` only when neither support nor pairs show any
 /// symmetry (for example, one flat side) and no width places a plane.
 pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;

@@ -516,20 +516,33 @@ pub(super) fn write(
     } else {
         ScalarKind::F64
     };
-    let ascii = encoding == Encoding::Ascii;
-    let mut kinds = vec![coord; 3];
+    write_header(w, cloud, coord, encoding)?;
+    match encoding {
+        Encoding::Ascii => write_ascii(w, cloud, coord),
+        Encoding::Binary => write_binary(w, cloud, coord),
+        Encoding::Compressed => write_compressed(w, cloud, coord),
+    }
+}
+
+/// The header up to and including its `DATA` line: x, y, z as `coord`, then the colours and
+/// the attributes.
+fn write_header(
+    w: &mut impl Write,
+    cloud: &PointCloud,
+    coord: ScalarKind,
+    encoding: Encoding,
+) -> std::io::Result<()> {
     let mut names = vec!["x".to_string(), "y".into(), "z".into()];
     let mut types: Vec<(char, usize)> = vec![type_and_size(coord); 3];
     if cloud.colors.is_some() {
         names.push("rgb".into());
         // PCL's own convention is F for binary; ascii is clearer as the integer.
+        let ascii = encoding == Encoding::Ascii;
         types.push((if ascii { 'U' } else { 'F' }, 4));
-        kinds.push(ScalarKind::U32);
     }
     for a in &cloud.attributes {
         names.push(a.name.clone());
         types.push(type_and_size(a.kind));
-        kinds.push(a.kind);
     }
     let n = cloud.len();
     let join = |v: Vec<String>| v.join(" ");
@@ -554,72 +567,81 @@ pub(super) fn write(
         w,
         "WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}"
     )?;
-    let color_bits = |i: usize| cloud.colors.as_ref().map(|c| packed(c[i]));
-    match encoding {
-        Encoding::Ascii => {
-            writeln!(w, "DATA ascii")?;
-            for i in 0..n {
-                let p = cloud.positions[i];
-                if coord == ScalarKind::F32 {
-                    write!(w, "{} {} {}", p[0] as f32, p[1] as f32, p[2] as f32)?;
-                } else {
-                    write!(w, "{} {} {}", p[0], p[1], p[2])?;
-                }
-                if let Some(bits) = color_bits(i) {
-                    write!(w, " {bits}")?;
-                }
-                for a in &cloud.attributes {
-                    write!(w, " {}", a.values[i])?;
-                }
-                writeln!(w)?;
-            }
+    let data = match encoding {
+        Encoding::Ascii => "ascii",
+        Encoding::Binary => "binary",
+        Encoding::Compressed => "binary_compressed",
+    };
+    writeln!(w, "DATA {data}")
+}
+
+fn write_ascii(w: &mut impl Write, cloud: &PointCloud, coord: ScalarKind) -> std::io::Result<()> {
+    for (i, p) in cloud.positions.iter().enumerate() {
+        if coord == ScalarKind::F32 {
+            write!(w, "{} {} {}", p[0] as f32, p[1] as f32, p[2] as f32)?;
+        } else {
+            write!(w, "{} {} {}", p[0], p[1], p[2])?;
         }
-        Encoding::Binary => {
-            writeln!(w, "DATA binary")?;
-            let mut rec = Vec::new();
-            for i in 0..n {
-                rec.clear();
-                for c in cloud.positions[i] {
-                    le_bytes(coord, c, &mut rec);
-                }
-                if let Some(bits) = color_bits(i) {
-                    rec.extend_from_slice(&bits.to_le_bytes());
-                }
-                for a in &cloud.attributes {
-                    le_bytes(a.kind, a.values[i], &mut rec);
-                }
-                w.write_all(&rec)?;
-            }
+        if let Some(colors) = &cloud.colors {
+            write!(w, " {}", packed(colors[i]))?;
         }
-        Encoding::Compressed => {
-            writeln!(w, "DATA binary_compressed")?;
-            let mut columns = Vec::new();
-            for axis in 0..3 {
-                for p in &cloud.positions {
-                    le_bytes(coord, p[axis], &mut columns);
-                }
-            }
-            if let Some(colors) = &cloud.colors {
-                for c in colors {
-                    columns.extend_from_slice(&packed(*c).to_le_bytes());
-                }
-            }
-            for a in &cloud.attributes {
-                for &v in &a.values {
-                    le_bytes(a.kind, v, &mut columns);
-                }
-            }
-            let compressed = if columns.is_empty() {
-                Vec::new()
-            } else {
-                lzf::compress(&columns).unwrap_or_else(|_| lzf_literals(&columns))
-            };
-            w.write_all(&(compressed.len() as u32).to_le_bytes())?;
-            w.write_all(&(columns.len() as u32).to_le_bytes())?;
-            w.write_all(&compressed)?;
+        for a in &cloud.attributes {
+            write!(w, " {}", a.values[i])?;
         }
+        writeln!(w)?;
     }
     Ok(())
+}
+
+/// One little-endian record per point.
+fn write_binary(w: &mut impl Write, cloud: &PointCloud, coord: ScalarKind) -> std::io::Result<()> {
+    let mut rec = Vec::new();
+    for (i, p) in cloud.positions.iter().enumerate() {
+        rec.clear();
+        for &c in p {
+            le_bytes(coord, c, &mut rec);
+        }
+        if let Some(colors) = &cloud.colors {
+            rec.extend_from_slice(&packed(colors[i]).to_le_bytes());
+        }
+        for a in &cloud.attributes {
+            le_bytes(a.kind, a.values[i], &mut rec);
+        }
+        w.write_all(&rec)?;
+    }
+    Ok(())
+}
+
+/// The fields column after column, LZF-compressed, behind the two sizes.
+fn write_compressed(
+    w: &mut impl Write,
+    cloud: &PointCloud,
+    coord: ScalarKind,
+) -> std::io::Result<()> {
+    let mut columns = Vec::new();
+    for axis in 0..3 {
+        for p in &cloud.positions {
+            le_bytes(coord, p[axis], &mut columns);
+        }
+    }
+    if let Some(colors) = &cloud.colors {
+        for c in colors {
+            columns.extend_from_slice(&packed(*c).to_le_bytes());
+        }
+    }
+    for a in &cloud.attributes {
+        for &v in &a.values {
+            le_bytes(a.kind, v, &mut columns);
+        }
+    }
+    let compressed = if columns.is_empty() {
+        Vec::new()
+    } else {
+        lzf::compress(&columns).unwrap_or_else(|_| lzf_literals(&columns))
+    };
+    w.write_all(&(compressed.len() as u32).to_le_bytes())?;
+    w.write_all(&(columns.len() as u32).to_le_bytes())?;
+    w.write_all(&compressed)
 }
 
 #[cfg(test)]

@@ -158,21 +158,7 @@ pub fn train_orienter(
     let load = |s: &SampleRef| -> Result<Vec<[f64; 3]>, DataError> {
         Ok(cache.get(&s.input, &settings.views)?.points())
     };
-    let mut val_rng = Lcg::new(derive_seed(settings.seed, "orient validation"));
-    let stride = validation
-        .len()
-        .div_ceil(settings.val_samples.max(1))
-        .max(1);
-    let mut val_set = Vec::new();
-    for s in validation.iter().step_by(stride) {
-        let points = load(s)?;
-        if points.len() < 10 {
-            continue;
-        }
-        let turn = val_rng.range(-180.0, 180.0);
-        let points = turned(&points, turn, 0.0, &mut val_rng);
-        val_set.push((points, heading_of_turn(turn)));
-    }
+    let val_set = validation_set(validation, settings, &load)?;
     if val_set.is_empty() {
         return Err(OrientTrainError::NoValidation(data.root.clone()));
     }
@@ -192,20 +178,7 @@ pub fn train_orienter(
     };
     let mut draw = Lcg::new(derive_seed(settings.seed, "orient draws"));
     for step in 1..=settings.steps {
-        let mut inputs = Vec::with_capacity(settings.batch * n * 3);
-        let mut targets = Vec::with_capacity(settings.batch * 4);
-        let mut filled = 0;
-        while filled < settings.batch {
-            let points = load(&train[draw.below(train.len())])?;
-            if points.len() < 10 {
-                continue;
-            }
-            let turn = draw.range(-180.0, 180.0);
-            let points = turned(&points, turn, settings.noise, &mut draw);
-            inputs.extend(sample_points(&points, n, &mut draw));
-            targets.extend(target(heading_of_turn(turn)));
-            filled += 1;
-        }
+        let (inputs, targets) = draw_batch(train, settings, n, &mut draw, &load)?;
         let b = settings.batch;
         // [batch, N, 3]
         let x = Tensor::<3>::from_data(TensorData::new(inputs, [b, n, 3]), &autodiff);
@@ -248,6 +221,63 @@ pub fn train_orienter(
         Orienter::new(net.valid(), config.clone(), device.clone()),
         scores,
     ))
+}
+
+/// Partials with fewer points say nothing about a heading.
+const MIN_POINTS: usize = 10;
+
+/// A partial's points turned to a heading, and that heading (degrees).
+type Turned = (Vec<[f64; 3]>, f64);
+
+/// About `settings.val_samples` validation partials spread over `validation`, each turned
+/// to a random heading (the same ones in every run of a seed), with that heading.
+fn validation_set(
+    validation: &[SampleRef],
+    settings: &OrientSettings,
+    load: &impl Fn(&SampleRef) -> Result<Vec<[f64; 3]>, DataError>,
+) -> Result<Vec<Turned>, DataError> {
+    let mut rng = Lcg::new(derive_seed(settings.seed, "orient validation"));
+    let stride = validation
+        .len()
+        .div_ceil(settings.val_samples.max(1))
+        .max(1);
+    let mut set = Vec::new();
+    for s in validation.iter().step_by(stride) {
+        let points = load(s)?;
+        if points.len() < MIN_POINTS {
+            continue;
+        }
+        let turn = rng.range(-180.0, 180.0);
+        set.push((turned(&points, turn, 0.0, &mut rng), heading_of_turn(turn)));
+    }
+    Ok(set)
+}
+
+/// A training batch drawn from `train`: `settings.batch` partials turned to random headings
+/// with noise, `n` points each (`[batch, n, 3]` flattened), and their heading targets
+/// (`[batch, 4]` flattened).
+fn draw_batch(
+    train: &[SampleRef],
+    settings: &OrientSettings,
+    n: usize,
+    draw: &mut Lcg,
+    load: &impl Fn(&SampleRef) -> Result<Vec<[f64; 3]>, DataError>,
+) -> Result<(Vec<f32>, Vec<f32>), DataError> {
+    let mut inputs = Vec::with_capacity(settings.batch * n * 3);
+    let mut targets = Vec::with_capacity(settings.batch * 4);
+    let mut filled = 0;
+    while filled < settings.batch {
+        let points = load(&train[draw.below(train.len())])?;
+        if points.len() < MIN_POINTS {
+            continue;
+        }
+        let turn = draw.range(-180.0, 180.0);
+        let points = turned(&points, turn, settings.noise, draw);
+        inputs.extend(sample_points(&points, n, draw));
+        targets.extend(target(heading_of_turn(turn)));
+        filled += 1;
+    }
+    Ok((inputs, targets))
 }
 
 #[cfg(test)]

@@ -309,6 +309,28 @@ fn load_ground_truth(path: &Path, log: Log) -> anyhow::Result<PointCloud> {
 }
 
 fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyhow::Result<()> {
+    let samples = dataset_samples(data, pred_dir, args.ground_truth)?;
+    let bar = super::progress(samples.len(), "eval", log);
+    let results = samples
+        .iter()
+        .map(|s| {
+            let scored = score_sample(s, &args.tau, log);
+            bar.inc(1);
+            scored
+        })
+        .collect::<anyhow::Result<Vec<CloudMetrics>>>()?;
+    bar.finish_and_clear();
+    let (report, table) = dataset_report(data, pred_dir, args, &samples, &results);
+    print_results(args.json, &report, &table)
+}
+
+/// The test partials of the data directory `data` (from `mvpcc prepare`), each with its
+/// completion in `pred_dir` and its `ground_truth`; an error when any has no completion.
+fn dataset_samples(
+    data: &Path,
+    pred_dir: &Path,
+    ground_truth: GroundTruth,
+) -> anyhow::Result<Vec<DataSample>> {
     let manifest_path = data.join("manifest.json");
     let text = std::fs::read_to_string(&manifest_path).with_context(|| {
         format!(
@@ -325,7 +347,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
     let mut missing = Vec::new();
     for model in manifest.models.iter().filter(|m| m.split == TEST) {
         let clouds = layout.clouds(&model.split, &model.category, &model.name);
-        let gt = match args.ground_truth {
+        let gt = match ground_truth {
             GroundTruth::Fine => clouds.join(GT_FINE),
             GroundTruth::Coarse => clouds.join(GT_COARSE),
         };
@@ -357,25 +379,38 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
     if samples.is_empty() {
         bail!("{}: the data has no test partials", data.display());
     }
-    let bar = super::progress(samples.len(), "eval", log);
-    let results = samples
-        .iter()
-        .map(|s| {
-            let pred = load(&s.pred, None, log)?;
-            let gt = load_ground_truth(&s.gt, log)?;
-            let turned: Vec<[f64; 3]> = pred
-                .positions
-                .iter()
-                .map(|p| s.spec.to_object_frame(p.map(|c| c as f32)).map(f64::from))
-                .collect();
-            bar.inc(1);
-            Ok(compare_clouds(&turned, &gt.positions, &args.tau))
-        })
-        .collect::<anyhow::Result<Vec<CloudMetrics>>>()?;
-    bar.finish_and_clear();
+    Ok(samples)
+}
 
+/// A completion scored against its ground truth, in the object's frame (a scanner partial is
+/// written in its path's).
+fn score_sample(sample: &DataSample, tau: &[f64], log: Log) -> anyhow::Result<CloudMetrics> {
+    let pred = load(&sample.pred, None, log)?;
+    let gt = load_ground_truth(&sample.gt, log)?;
+    let turned: Vec<[f64; 3]> = pred
+        .positions
+        .iter()
+        .map(|p| {
+            sample
+                .spec
+                .to_object_frame(p.map(|c| c as f32))
+                .map(f64::from)
+        })
+        .collect();
+    Ok(compare_clouds(&turned, &gt.positions, tau))
+}
+
+/// The report and table of a data directory's scores: every sample, the mean of each category
+/// and protocol, and of all.
+fn dataset_report(
+    data: &Path,
+    pred_dir: &Path,
+    args: &EvalArgs,
+    samples: &[DataSample],
+    results: &[CloudMetrics],
+) -> (DatasetReport, Table) {
     let mut groups: BTreeMap<String, Vec<CloudMetrics>> = BTreeMap::new();
-    for (s, m) in samples.iter().zip(&results) {
+    for (s, m) in samples.iter().zip(results) {
         for key in [
             format!("category {}", s.category),
             format!("protocol {}", s.protocol),
@@ -393,7 +428,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
         groups: BTreeMap::new(),
         samples: samples
             .iter()
-            .zip(&results)
+            .zip(results)
             .map(|(s, m)| SampleReport {
                 scores: Scores::of(m, &args.metrics),
                 name: s.name.clone(),
@@ -401,7 +436,8 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
             })
             .collect(),
     };
-    for (key, ms) in groups.iter().chain([(&"all".to_string(), &results)]) {
+    let all = results.to_vec();
+    for (key, ms) in groups.iter().chain([(&"all".to_string(), &all)]) {
         let mean = mean_metrics(ms);
         table.cloud_row(&format!("{key} ({})", ms.len()), &mean, &args.metrics);
         let group = GroupReport {
@@ -410,7 +446,7 @@ fn eval_dataset(data: &Path, pred_dir: &Path, args: &EvalArgs, log: Log) -> anyh
         };
         report.groups.insert(key.clone(), group);
     }
-    print_results(args.json, &report, &table)
+    (report, table)
 }
 
 fn eval_views(pred_dir: &Path, gt_dir: &Path) -> anyhow::Result<(Vec<usize>, Vec<ImageMetrics>)> {

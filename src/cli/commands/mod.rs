@@ -78,6 +78,23 @@ pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Res
     Ok(loaded.cloud)
 }
 
+/// A training loop's progress bar over `steps` (0 until the loop knows them) on stderr, with
+/// its rate; hidden under `--quiet`.
+pub(crate) fn step_bar(steps: u64, log: Log) -> indicatif::ProgressBar {
+    let bar = if log.quiet() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(steps)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "step {pos}/{len} {bar:30} {msg} [{elapsed} < {eta}, {per_sec}]",
+        )
+        .expect("a valid progress template"),
+    );
+    bar
+}
+
 /// A progress bar with ETA on stderr; hidden under `--quiet` or for a single item.
 pub(crate) fn progress(len: usize, label: &str, log: Log) -> indicatif::ProgressBar {
     let bar = if len > 1 && !log.quiet() {

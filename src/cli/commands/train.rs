@@ -5,11 +5,12 @@ use super::Log;
 use crate::cli::args::TrainArgs;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{ModelConfig, Preset};
 use mvpcc::train::{
-    train, InitWeights, Job, LogRecord, Monitor, Outcome, TrainSettings, CONFIG_FILE, SETTINGS_FILE,
+    train, InitWeights, Job, LogRecord, Monitor, Outcome, Summary, TrainSettings, CONFIG_FILE,
+    SETTINGS_FILE,
 };
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -268,17 +269,7 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     })
     .context("cannot install the Ctrl-C handler")?;
 
-    let bar = if log.quiet() {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(0)
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "step {pos}/{len} {bar:30} {msg} [{elapsed} < {eta}, {per_sec}]",
-        )
-        .expect("a valid progress template"),
-    );
+    let bar = super::step_bar(0, log);
     let mut monitor = Progress { bar, log, stop };
     let job = Job {
         data: args.data.clone(),
@@ -294,7 +285,17 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     };
     let result = train(job, &mut monitor);
     monitor.bar.finish_and_clear();
-    let summary = result?;
+    report(&result?, &settings, &run, args.json, log)
+}
+
+/// How the run ended and its best validation on stderr; with `json`, the summary on stdout.
+fn report(
+    summary: &Summary,
+    settings: &TrainSettings,
+    run: &Path,
+    json: bool,
+    log: Log,
+) -> anyhow::Result<()> {
     match summary.outcome {
         Outcome::Interrupted => log.info(format!(
             "interrupted at step {}: checkpoint {} (continue with --resume)",
@@ -319,7 +320,7 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
             run.join("best").display()
         ));
     }
-    if args.json {
+    if json {
         let json = serde_json::json!({
             "run": run,
             "outcome": format!("{:?}", summary.outcome).to_lowercase(),

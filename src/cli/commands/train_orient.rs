@@ -4,7 +4,6 @@
 use super::Log;
 use crate::cli::args::TrainOrientArgs;
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use mvpcc::complete::orient::OrienterConfig;
 use mvpcc::io::atomic_write;
 use mvpcc::train::orient::{train_orienter, OrientData, OrientSettings, OrientTrainError};
@@ -15,20 +14,7 @@ pub const WEIGHTS_FILE: &str = "orienter.safetensors";
 
 pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
     let data = OrientData::scan(&args.data)?;
-    let out = args.out.clone().unwrap_or_else(|| {
-        let name = args
-            .data
-            .file_name()
-            .map_or("data".into(), |n| n.to_string_lossy().into_owned());
-        PathBuf::from("runs").join(format!("orient-{name}"))
-    });
-    if out.join(WEIGHTS_FILE).exists() {
-        anyhow::bail!(
-            "{}: already holds {WEIGHTS_FILE}; choose another --out",
-            out.display()
-        );
-    }
-    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
+    let out = output_dir(&args)?;
     let config = OrienterConfig::new().with_points(args.points);
     let settings = OrientSettings {
         batch: args.batch,
@@ -58,15 +44,7 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
     let log_path = out.join("log.jsonl");
     let mut log_file =
         std::fs::File::create(&log_path).with_context(|| log_path.display().to_string())?;
-    let bar = if log.quiet() {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(settings.steps)
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg} [{elapsed} < {eta}]")
-            .expect("a valid progress template"),
-    );
+    let bar = super::step_bar(settings.steps, log);
     let mut smoothed = None;
     let cache = args.cache_mb << 20;
     let (orienter, scores) =
@@ -110,6 +88,26 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
         100.0 * scores.flips
     ));
     Ok(())
+}
+
+/// The run's directory (`--out`, or `runs/orient-<data>`), created; refused when it already
+/// holds a trained network.
+fn output_dir(args: &TrainOrientArgs) -> anyhow::Result<PathBuf> {
+    let out = args.out.clone().unwrap_or_else(|| {
+        let name = args
+            .data
+            .file_name()
+            .map_or("data".into(), |n| n.to_string_lossy().into_owned());
+        PathBuf::from("runs").join(format!("orient-{name}"))
+    });
+    if out.join(WEIGHTS_FILE).exists() {
+        anyhow::bail!(
+            "{}: already holds {WEIGHTS_FILE}; choose another --out",
+            out.display()
+        );
+    }
+    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
+    Ok(out)
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {

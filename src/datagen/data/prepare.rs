@@ -7,7 +7,7 @@ use super::{
 use crate::core::camera::Camera;
 use crate::core::cloud::PointCloud;
 use crate::core::rng::{derive_seed, Lcg};
-use crate::datagen::mesh::{read_mesh, MeshError, ReadOptions, SignedAxis};
+use crate::datagen::mesh::{read_mesh, Mesh, MeshError, MeshStats, ReadOptions, SignedAxis};
 use crate::datagen::raster::{render_views, Surface};
 use crate::datagen::scan::{ground_truth, partial};
 use crate::io::{atomic_write, write_cloud, CloudIoError, Encoding, Format};
@@ -95,34 +95,7 @@ pub fn prepare_model(
     // Whatever an interrupted run left goes first, so a mesh that now fails leaves nothing.
     clear(layout, split, source)?;
     let path = &source.path;
-    let mut mesh = read_mesh(
-        path,
-        ReadOptions {
-            allow_missing_materials: params.allow_missing_materials,
-        },
-    )?;
-    let stats = mesh.check(path, params.max_triangles)?;
-    let up: SignedAxis = params
-        .up
-        .parse()
-        .map_err(|problem| PrepareError::Normalize {
-            path: path.clone(),
-            problem,
-        })?;
-    let forward: SignedAxis =
-        params
-            .forward
-            .parse()
-            .map_err(|problem| PrepareError::Normalize {
-                path: path.clone(),
-                problem,
-            })?;
-    let scale = mesh
-        .normalize(up, forward)
-        .map_err(|problem| PrepareError::Normalize {
-            path: path.clone(),
-            problem,
-        })?;
+    let (mesh, stats, scale) = normalized_mesh(path, params)?;
     let seed = derive_seed(params.seed, &format!("{}/{}", source.category, source.name));
     let cameras = Camera::set(&params.views, params.size).map_err(|e| PrepareError::Normalize {
         path: path.clone(),
@@ -145,56 +118,19 @@ pub fn prepare_model(
         .into_par_iter()
         .map(|k| {
             let sample_seed = derive_seed(seed, &k.to_string());
-            let mut rng = Lcg::new(sample_seed);
-            let (spec, surface) = partial(&mesh, &params.partial, &mut rng);
-            let dir = layout.input_views(split, &source.category, &source.name, k);
-            create_dir(&dir)?;
-            let views = match params.views_frame {
-                ViewsFrame::Path => project(&surface.points, Some(&surface.colors), &cameras),
-                ViewsFrame::Object => {
-                    let aligned: Vec<[f32; 3]> = surface
-                        .points
-                        .iter()
-                        .map(|&p| spec.to_object_frame(p))
-                        .collect();
-                    project(&aligned, Some(&surface.colors), &cameras)
-                }
-            };
-            write_views(&dir, &views)?;
-            let points = surface.len();
-            if keep_partials {
-                write_cloud(
-                    &clouds_dir.join(format!("partial_{k}.ply")),
-                    &cloud_of(surface),
-                    Some(Format::Ply),
-                    Encoding::Binary,
-                )?;
-            }
-            Ok(SampleEntry {
+            let views_dir = layout.input_views(split, &source.category, &source.name, k);
+            let cloud = keep_partials.then(|| clouds_dir.join(format!("partial_{k}.ply")));
+            let sample = Sample {
                 k,
                 seed: sample_seed,
-                points,
-                spec,
-            })
+                views_dir: &views_dir,
+                cloud: cloud.as_deref(),
+            };
+            write_sample(&mesh, params, &cameras, sample)
         })
         .collect::<Result<Vec<_>, PrepareError>>()?;
     let gt_points = gt.len();
-    let gt_cloud = cloud_of(gt);
-    write_cloud(
-        &clouds_dir.join(GT_FINE),
-        &gt_cloud,
-        Some(Format::Ply),
-        Encoding::Binary,
-    )?;
-    // Beside the partials `eval` scores: sampling is quadratic, so not for models nobody scores.
-    if keep_partials {
-        write_cloud(
-            &clouds_dir.join(GT_COARSE),
-            &coarse(&gt_cloud),
-            Some(Format::Ply),
-            Encoding::Binary,
-        )?;
-    }
+    write_ground_truth(&clouds_dir, cloud_of(gt), keep_partials)?;
     let entry = ModelEntry {
         category: source.category.clone(),
         name: source.name.clone(),
@@ -215,4 +151,91 @@ pub fn prepare_model(
         source,
     })?;
     Ok(entry)
+}
+
+/// The mesh at `path`, checked and turned into the normalized pose `params` asks for; its
+/// statistics and the scale it was shrunk by.
+fn normalized_mesh(
+    path: &Path,
+    params: &PrepareParams,
+) -> Result<(Mesh, MeshStats, f32), PrepareError> {
+    let normalize_error = |problem| PrepareError::Normalize {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let mut mesh = read_mesh(
+        path,
+        ReadOptions {
+            allow_missing_materials: params.allow_missing_materials,
+        },
+    )?;
+    let stats = mesh.check(path, params.max_triangles)?;
+    let up: SignedAxis = params.up.parse().map_err(normalize_error)?;
+    let forward: SignedAxis = params.forward.parse().map_err(normalize_error)?;
+    let scale = mesh.normalize(up, forward).map_err(normalize_error)?;
+    Ok((mesh, stats, scale))
+}
+
+/// Where one partial sample goes: its number `k`, its seed, its views' directory and, when
+/// kept, its cloud's file.
+struct Sample<'a> {
+    k: usize,
+    seed: u64,
+    views_dir: &'a Path,
+    cloud: Option<&'a Path>,
+}
+
+/// Scans one partial of `mesh` and writes its views (in the frame `params` asks for) and,
+/// where asked, its cloud.
+fn write_sample(
+    mesh: &Mesh,
+    params: &PrepareParams,
+    cameras: &[Camera],
+    sample: Sample,
+) -> Result<SampleEntry, PrepareError> {
+    let mut rng = Lcg::new(sample.seed);
+    let (spec, surface) = partial(mesh, &params.partial, &mut rng);
+    create_dir(sample.views_dir)?;
+    let views = match params.views_frame {
+        ViewsFrame::Path => project(&surface.points, Some(&surface.colors), cameras),
+        ViewsFrame::Object => {
+            let aligned: Vec<[f32; 3]> = surface
+                .points
+                .iter()
+                .map(|&p| spec.to_object_frame(p))
+                .collect();
+            project(&aligned, Some(&surface.colors), cameras)
+        }
+    };
+    write_views(sample.views_dir, &views)?;
+    let points = surface.len();
+    if let Some(path) = sample.cloud {
+        write_cloud(
+            path,
+            &cloud_of(surface),
+            Some(Format::Ply),
+            Encoding::Binary,
+        )?;
+    }
+    Ok(SampleEntry {
+        k: sample.k,
+        seed: sample.seed,
+        points,
+        spec,
+    })
+}
+
+/// Writes the fine ground truth and, beside kept partials (the ones `eval` scores), the
+/// coarse one: its sampling is quadratic, so not for models nobody scores.
+fn write_ground_truth(dir: &Path, gt: PointCloud, with_coarse: bool) -> Result<(), PrepareError> {
+    write_cloud(&dir.join(GT_FINE), &gt, Some(Format::Ply), Encoding::Binary)?;
+    if with_coarse {
+        write_cloud(
+            &dir.join(GT_COARSE),
+            &coarse(&gt),
+            Some(Format::Ply),
+            Encoding::Binary,
+        )?;
+    }
+    Ok(())
 }

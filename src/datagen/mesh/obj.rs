@@ -64,78 +64,101 @@ pub fn read(path: &Path, options: ReadOptions) -> Result<Mesh, MeshError> {
         ..Mesh::default()
     };
     for m in &materials {
-        let texture = match m.diffuse_texture.as_deref().map(str::trim) {
-            Some(name) if !name.is_empty() => {
-                // MTL options such as `-s 1 1 1` precede the file name, which comes last.
-                let file = name.split_whitespace().last().unwrap_or(name);
-                let texture_path = dir.join(file.replace('\\', "/"));
-                match cache.load(&texture_path) {
-                    Ok(t) => Some(t),
-                    Err(_) if options.allow_missing_materials => None,
-                    Err(problem) => {
-                        return Err(MeshError::Texture {
-                            path: path.to_path_buf(),
-                            texture: texture_path,
-                            problem,
-                        })
-                    }
-                }
-            }
-            _ => None,
-        };
-        // A texture replaces Kd (ShapeNet's MTLs pair textures with an arbitrary Kd).
-        let color = match (&texture, m.diffuse) {
-            (Some(_), _) => [1.0; 3],
-            (None, Some(kd)) => kd,
-            (None, None) => GREY,
-        };
-        mesh.materials.push(Material {
-            name: m.name.clone(),
-            color,
-            texture,
-        });
+        mesh.materials
+            .push(material(m, path, dir, &mut cache, options)?);
     }
     let textured = mesh.materials.iter().any(|m| m.texture.is_some());
     let mut uv = Vec::new();
     for model in &models {
-        let m = &model.mesh;
-        let base = mesh.positions.len() as u32;
-        let count = m.positions.len() / 3;
-        mesh.positions
-            .extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-        let material = m
-            .material_id
-            .filter(|&i| i < materials.len())
-            .map_or(0, |i| i as u32 + 1);
-        let has_uv = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
-        for (t, tri) in m.indices.chunks_exact(3).enumerate() {
-            if tri.iter().any(|&i| i as usize >= count) {
-                return Err(MeshError::Read {
-                    path: path.to_path_buf(),
-                    problem: "a face refers to a vertex that does not exist".into(),
-                });
-            }
-            mesh.triangles
-                .push([tri[0] + base, tri[1] + base, tri[2] + base]);
-            mesh.material_of.push(material);
-            if textured {
-                uv.push(std::array::from_fn(|k| {
-                    if !has_uv {
-                        return [0.0; 2];
-                    }
-                    let i = m.texcoord_indices[3 * t + k] as usize;
-                    match m.texcoords.get(2 * i..2 * i + 2) {
-                        Some(c) => [c[0], c[1]],
-                        None => [0.0; 2],
-                    }
-                }));
-            }
-        }
+        append(&mut mesh, &mut uv, &model.mesh, materials.len(), textured)
+            .map_err(|problem| read_error(problem.into()))?;
     }
     if textured {
         mesh.corner_uv = Some(uv);
     }
     Ok(mesh)
+}
+
+/// The material `m` of the OBJ file `path` (its textures named relative to `dir`).
+fn material(
+    m: &tobj::Material,
+    path: &Path,
+    dir: &Path,
+    cache: &mut TextureCache,
+    options: ReadOptions,
+) -> Result<Material, MeshError> {
+    let texture = match m.diffuse_texture.as_deref().map(str::trim) {
+        Some(name) if !name.is_empty() => {
+            // MTL options such as `-s 1 1 1` precede the file name, which comes last.
+            let file = name.split_whitespace().last().unwrap_or(name);
+            let texture_path = dir.join(file.replace('\\', "/"));
+            match cache.load(&texture_path) {
+                Ok(t) => Some(t),
+                Err(_) if options.allow_missing_materials => None,
+                Err(problem) => {
+                    return Err(MeshError::Texture {
+                        path: path.to_path_buf(),
+                        texture: texture_path,
+                        problem,
+                    })
+                }
+            }
+        }
+        _ => None,
+    };
+    // A texture replaces Kd (ShapeNet's MTLs pair textures with an arbitrary Kd).
+    let color = match (&texture, m.diffuse) {
+        (Some(_), _) => [1.0; 3],
+        (None, Some(kd)) => kd,
+        (None, None) => GREY,
+    };
+    Ok(Material {
+        name: m.name.clone(),
+        color,
+        texture,
+    })
+}
+
+/// Appends one OBJ object's vertices and triangles to `mesh` (materials after the default
+/// one, of which the file has `materials`), and with `textured` its corners' texture
+/// coordinates to `uv`.
+fn append(
+    mesh: &mut Mesh,
+    uv: &mut Vec<[[f32; 2]; 3]>,
+    m: &tobj::Mesh,
+    materials: usize,
+    textured: bool,
+) -> Result<(), &'static str> {
+    let base = mesh.positions.len() as u32;
+    let count = m.positions.len() / 3;
+    mesh.positions
+        .extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+    let material = m
+        .material_id
+        .filter(|&i| i < materials)
+        .map_or(0, |i| i as u32 + 1);
+    let has_uv = !m.texcoords.is_empty() && m.texcoord_indices.len() == m.indices.len();
+    for (t, tri) in m.indices.chunks_exact(3).enumerate() {
+        if tri.iter().any(|&i| i as usize >= count) {
+            return Err("a face refers to a vertex that does not exist");
+        }
+        mesh.triangles
+            .push([tri[0] + base, tri[1] + base, tri[2] + base]);
+        mesh.material_of.push(material);
+        if textured {
+            uv.push(std::array::from_fn(|k| {
+                if !has_uv {
+                    return [0.0; 2];
+                }
+                let i = m.texcoord_indices[3 * t + k] as usize;
+                match m.texcoords.get(2 * i..2 * i + 2) {
+                    Some(c) => [c[0], c[1]],
+                    None => [0.0; 2],
+                }
+            }));
+        }
+    }
+    Ok(())
 }
 
 /// Writes `mesh` as `path` (OBJ) and a material library beside it with the same stem.

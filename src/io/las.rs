@@ -306,22 +306,41 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     if n < declared {
         return Err(Problem::Truncated { declared, found: n });
     }
-    // Most writers scale 8-bit colour to 16 bits; some store 8-bit values as they are.
+    let colors = (has_color && colors16.len() == n).then(|| eight_bit(&colors16));
+    let attributes = attributes(intensity, classification, synthetic);
+    Ok(PointCloud {
+        positions,
+        colors,
+        attributes,
+        quantization: Some(quantization),
+    })
+}
+
+/// LAS colours as 8-bit: most writers scale 8-bit colour to 16 bits; some store 8-bit values
+/// as they are, which no value above 255 betrays.
+fn eight_bit(colors16: &[[u16; 3]]) -> Vec<[u8; 3]> {
     let sixteen_bit = colors16.iter().flatten().any(|&v| v > 255);
-    let colors = (has_color && colors16.len() == n).then(|| {
-        colors16
-            .iter()
-            .map(|c| {
-                c.map(|v| {
-                    if sixteen_bit {
-                        ((v as u32 + 128) / 257) as u8
-                    } else {
-                        v as u8
-                    }
-                })
+    colors16
+        .iter()
+        .map(|c| {
+            c.map(|v| {
+                if sixteen_bit {
+                    ((v as u32 + 128) / 257) as u8
+                } else {
+                    v as u8
+                }
             })
-            .collect()
-    });
+        })
+        .collect()
+}
+
+/// The per-point fields kept beside the positions; the synthetic flag only where some point
+/// carries it.
+fn attributes(
+    intensity: Vec<f64>,
+    classification: Vec<f64>,
+    synthetic: Vec<f64>,
+) -> Vec<Attribute> {
     let mut attributes = vec![
         Attribute {
             name: "intensity".into(),
@@ -341,12 +360,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
             values: synthetic,
         });
     }
-    Ok(PointCloud {
-        positions,
-        colors,
-        attributes,
-        quantization: Some(quantization),
-    })
+    attributes
 }
 
 /// The input's quantization when every point fits its 32-bit range; otherwise a fresh one

@@ -234,14 +234,7 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
         skipped.clear();
     }
     let layout = Layout { root: out.clone() };
-    let mut done: Vec<ModelEntry> = Vec::new();
-    let mut todo = Vec::new();
-    for s in &sources {
-        match finished(&layout, s, &params) {
-            Some(entry) => done.push(entry),
-            None => todo.push(s),
-        }
-    }
+    let (mut done, todo) = resume(&layout, &sources, &params);
     let resumed = done.len();
     if resumed > 0 {
         log.info(format!(
@@ -276,14 +269,43 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
             None => Some(write_manifest(out, params, done, skipped)?),
         },
     };
-    log.info(format!(
+    log.info(summary_line(&summary, new));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    }
+    if summary.models == 0 && args.shard.is_none() {
+        bail!("{}: none of the meshes could be used", meshes.display());
+    }
+    Ok(())
+}
+
+/// The models of `sources` a previous run finished (their entries) and those still to do.
+fn resume<'a>(
+    layout: &Layout,
+    sources: &'a [Source],
+    params: &PrepareParams,
+) -> (Vec<ModelEntry>, Vec<&'a Source>) {
+    let mut done = Vec::new();
+    let mut todo = Vec::new();
+    for s in sources {
+        match finished(layout, s, params) {
+            Some(entry) => done.push(entry),
+            None => todo.push(s),
+        }
+    }
+    (done, todo)
+}
+
+/// The run's closing line on stderr; `new` models were prepared by this run.
+fn summary_line(summary: &Summary, new: usize) -> String {
+    format!(
         "prepared {} models ({} train, {} test; {} new at {:.2}/s, {} resumed), {} samples; {}",
         summary.models,
         summary.train,
         summary.test,
         new,
         summary.models_per_second,
-        resumed,
+        summary.resumed,
         summary.samples,
         match (&summary.manifest, &summary.shard) {
             (Some(path), _) => format!("{} skipped — see {path}", summary.skipped),
@@ -293,12 +315,5 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
             ),
             (None, None) => unreachable!("a run without --shard writes the manifest"),
         }
-    ));
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
-    }
-    if summary.models == 0 && args.shard.is_none() {
-        bail!("{}: none of the meshes could be used", meshes.display());
-    }
-    Ok(())
+    )
 }

@@ -202,16 +202,7 @@ fn main() -> Result<(), Error> {
             }
             // As `mvpcc eval --data` scores: back into the object's frame, stored coordinates.
             let score = |completed: &PointCloud| {
-                let pred: Vec<[f64; 3]> = completed
-                    .positions
-                    .iter()
-                    .map(|p| {
-                        sample
-                            .spec
-                            .to_object_frame(p.map(|c| c as f32))
-                            .map(f64::from)
-                    })
-                    .collect();
+                let pred = sample.spec.points_to_object_frame(&completed.positions);
                 let m = compare_clouds(&pred, &gt.positions, &[0.01]);
                 (m.cd_l2_half, m.fscores[0].f1)
             };

@@ -86,10 +86,6 @@ fn mirrored(
     Ok(completer.run(cloud, &settings)?.completion)
 }
 
-fn to_object(spec: &PartialSpec, p: [f64; 3]) -> [f64; 3] {
-    spec.to_object_frame(p.map(|c| c as f32)).map(f64::from)
-}
-
 fn f1(points: &[[f64; 3]], gt: &[[f64; 3]]) -> f64 {
     compare_clouds(points, gt, &[0.01]).fscores[0].f1
 }
@@ -121,23 +117,15 @@ fn measure(
     let bounds = Aabb::of(gt).ok_or("empty ground truth")?;
     let width = given_width.then(|| bounds.max[0] - bounds.min[0]);
     let completion = mirrored(completer, &cloud, width)?;
-    let measured: Vec<[f64; 3]> = cloud
-        .positions
-        .iter()
-        .map(|&p| to_object(spec, p))
-        .collect();
-    let completed: Vec<[f64; 3]> = completion
-        .cloud
-        .positions
-        .iter()
-        .map(|&p| to_object(spec, p))
-        .collect();
+    let measured = spec.points_to_object_frame(&cloud.positions);
+    let completed = spec.points_to_object_frame(&completion.cloud.positions);
     let length = bounds.longest_side();
     let (offset, angle, towards_scanner) = match completion.plane {
         Some(plane) => {
             let frame = &completion.frame;
-            let on = to_object(spec, frame.to_input([plane.offset, 0.0, 0.0]));
-            let ahead = to_object(spec, frame.to_input([plane.offset + 1.0, 0.0, 0.0]));
+            let [on, ahead] = [plane.offset, plane.offset + 1.0]
+                .map(|x| frame.to_input([x, 0.0, 0.0]))
+                .map(|p| spec.points_to_object_frame(&[p])[0]);
             let n = [0, 1, 2].map(|i| ahead[i] - on[i]);
             let norm = n.iter().map(|v| v * v).sum::<f64>().sqrt();
             let n = n.map(|v| v / norm);

@@ -303,6 +303,15 @@ impl PartialSpec {
             }
         }
     }
+
+    /// A cloud completed from this partial, in the object's frame at the precision the
+    /// dataset stores (`f32`), as `mvpcc eval --data` scores it.
+    pub fn points_to_object_frame(&self, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        points
+            .iter()
+            .map(|p| self.to_object_frame(p.map(|c| c as f32)).map(f64::from))
+            .collect()
+    }
 }
 
 fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {

@@ -387,16 +387,7 @@ fn dataset_samples(
 fn score_sample(sample: &DataSample, tau: &[f64], log: Log) -> anyhow::Result<CloudMetrics> {
     let pred = load(&sample.pred, None, log)?;
     let gt = load_ground_truth(&sample.gt, log)?;
-    let turned: Vec<[f64; 3]> = pred
-        .positions
-        .iter()
-        .map(|p| {
-            sample
-                .spec
-                .to_object_frame(p.map(|c| c as f32))
-                .map(f64::from)
-        })
-        .collect();
+    let turned = sample.spec.points_to_object_frame(&pred.positions);
     Ok(compare_clouds(&turned, &gt.positions, tau))
 }
 

@@ -103,6 +103,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let pulled = sample
         .refine_offset(start, &normals, true)
         .or_else(|| sample.refine_offset(start, &normals, false));
+    let seen = Seen::of(points, &bounds);
     let found = match pulled {
         Some(c) if supported => Some((c, PlaneFit::Refined)),
         Some(c) => Some((c, PlaneFit::Pairs)),
@@ -110,7 +111,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         None => None,
     }
     .map(|(refined, fit)| {
-        let offset = held_back(points, &bounds, refined);
+        let offset = held_back(points, &bounds, &seen, refined);
         let fit = if offset == refined {
             fit
         } else {
@@ -119,7 +120,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         sample.plane(offset, fit)
     });
     match width {
-        Some(width) => with_width(points, &bounds, &sample, width, found),
+        Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
     }
 }
@@ -167,12 +168,16 @@ const ONE_SIDED: f64 = 0.75;
 /// grazing angle, where the returns lie far apart, so the last one falls short of the edge:
 /// the chosen slice's far extreme is moved out by [`FAR_EDGE`] of the spacing between it and
 /// the next return position. `None` when no slice spans the width. `bounds` is the points'
-/// box.
-fn slices_middle(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<f64> {
+/// box, `slices` their [`horizontal_slices`].
+fn slices_middle(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    slices: &[Vec<usize>],
+    scanned_side: f64,
+) -> Option<f64> {
     let width = bounds.max[0] - bounds.min[0];
     let x = |i: &usize| points[*i][0];
-    let members = horizontal_slices(points, bounds);
-    let (middle, slice, far) = members
+    let (middle, slice, far) = slices
         .iter()
         .filter(|m| m.len() >= SLICE_POINTS)
         .filter_map(|m| {
@@ -208,34 +213,55 @@ fn paired(points: &[[f64; 3]], among: &[usize], far: usize, middle: f64) -> bool
 /// The plane offset `c`, held back at the middle of the slice seen widest on both sides
 /// ([`slices_middle`]; of the points' whole x range when none is or the cloud is not seen from
 /// one side, [`ONE_SIDED`]) when it lies beyond it towards the better scanned side (see
-/// [`find_plane`]). `bounds` is the points' box.
-fn held_back(points: &[[f64; 3]], bounds: &Aabb, c: f64) -> f64 {
+/// [`find_plane`]). `bounds` is the points' box, `seen` how they were seen in it.
+fn held_back(points: &[[f64; 3]], bounds: &Aabb, seen: &Seen, c: f64) -> f64 {
     let whole = bounds.center()[0];
-    let (scanned_side, near_share) = scanned_side(points, bounds);
-    let middle = if near_share >= ONE_SIDED {
-        slices_middle(points, bounds, scanned_side).unwrap_or(whole)
+    let middle = if seen.one_sided {
+        slices_middle(points, bounds, &seen.slices, seen.side).unwrap_or(whole)
     } else {
         whole
     };
-    if (c - middle) * scanned_side > 0.0 {
+    if (c - middle) * seen.side > 0.0 {
         middle
     } else {
         c
     }
 }
 
-/// The better scanned side of the width's middle (±1: the side holding more of the points)
-/// and the share of the points on it.
-fn scanned_side(points: &[[f64; 3]], bounds: &Aabb) -> (f64, f64) {
-    let whole = bounds.center()[0];
-    let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
-    let side = (mean - whole).signum();
-    let near_share = points
-        .iter()
-        .filter(|p| (p[0] - whole) * side > 0.0)
-        .count() as f64
-        / points.len() as f64;
-    (side, near_share)
+/// How a cloud was seen across its width, found once for the slices' bound and the width.
+struct Seen {
+    /// The better scanned side of the width's middle (±1: the side holding more points).
+    side: f64,
+    /// Whether at least [`ONE_SIDED`] of the points lie on that side, as on a drive-by.
+    one_sided: bool,
+    /// The points' [`horizontal_slices`] where the cloud is one-sided (nothing reads them
+    /// otherwise), else none.
+    slices: Vec<Vec<usize>>,
+}
+
+impl Seen {
+    /// `bounds` is the points' box.
+    fn of(points: &[[f64; 3]], bounds: &Aabb) -> Seen {
+        let whole = bounds.center()[0];
+        let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
+        let side = (mean - whole).signum();
+        let near_share = points
+            .iter()
+            .filter(|p| (p[0] - whole) * side > 0.0)
+            .count() as f64
+            / points.len() as f64;
+        let one_sided = near_share >= ONE_SIDED;
+        let slices = if one_sided {
+            horizontal_slices(points, bounds)
+        } else {
+            Vec::new()
+        };
+        Seen {
+            side,
+            one_sided,
+            slices,
+        }
+    }
 }
 
 /// [`with_width`] trusts the scanned flank to be seen at its widest only where it lies at least
@@ -253,20 +279,20 @@ const FLANK_SEEN: f64 = 0.8;
 /// bounds the plane only on that side: where the heading is off by a fraction of a degree, the
 /// ends of a long vehicle stick out past its flank, and setting every plane at half the width
 /// from that outermost point moved good planes by 0.6 % of the length (validation split,
-/// docs/completing.md). Clouds seen from both sides keep `plane` as found. `bounds` is the
-/// points' box, `sample` [`find_plane`]'s.
+/// docs/completing.md). Clouds seen from both sides keep `plane` as found. `seen` is how the
+/// points were seen, `sample` [`find_plane`]'s.
 fn with_width(
     points: &[[f64; 3]],
-    bounds: &Aabb,
+    seen: &Seen,
     sample: &Sample,
     width: f64,
     plane: Option<Plane>,
 ) -> Option<Plane> {
-    let (side, near_share) = scanned_side(points, bounds);
-    if near_share < ONE_SIDED {
+    if !seen.one_sided {
         return plane;
     }
-    let Some(flank) = scanned_flank(points, bounds, side) else {
+    let side = seen.side;
+    let Some(flank) = scanned_flank(points, &seen.slices, side) else {
         return plane;
     };
     let bound = side * (flank - width / 2.0);
@@ -277,11 +303,11 @@ fn with_width(
     }
 }
 
-/// The outermost x towards `side` (±1, times `side`) over the horizontal slices holding at
-/// least [`SLICE_POINTS`] points; `None` when no slice does. A stray point alone in its
-/// slice does not count.
-fn scanned_flank(points: &[[f64; 3]], bounds: &Aabb, side: f64) -> Option<f64> {
-    horizontal_slices(points, bounds)
+/// The outermost x towards `side` (±1, times `side`) over the `slices` (see
+/// [`horizontal_slices`]) holding at least [`SLICE_POINTS`] points; `None` when no slice does.
+/// A stray point alone in its slice does not count.
+fn scanned_flank(points: &[[f64; 3]], slices: &[Vec<usize>], side: f64) -> Option<f64> {
+    slices
         .iter()
         .filter(|m| m.len() >= SLICE_POINTS)
         .flat_map(|m| m.iter().map(|&i| points[i][0] * side))
@@ -726,13 +752,15 @@ mod tests {
         let bounds = Aabb::of(&points).unwrap();
         assert!((bounds.center()[0] - 0.025).abs() < 1e-9);
         let bound = -0.01 * FAR_EDGE / 2.0;
-        assert!((slices_middle(&points, &bounds, 1.0).unwrap() - bound).abs() < 1e-9);
+        let slices = horizontal_slices(&points, &bounds);
+        assert!((slices_middle(&points, &bounds, &slices, 1.0).unwrap() - bound).abs() < 1e-9);
+        let seen = Seen::of(&points, &bounds);
         assert!(
-            (held_back(&points, &bounds, 0.02) - bound).abs() < 1e-9,
+            (held_back(&points, &bounds, &seen, 0.02) - bound).abs() < 1e-9,
             "beyond it: held back"
         );
         assert_eq!(
-            held_back(&points, &bounds, -0.01),
+            held_back(&points, &bounds, &seen, -0.01),
             -0.01,
             "short of it: kept"
         );
@@ -743,7 +771,7 @@ mod tests {
         let bounds = Aabb::of(points).unwrap();
         let across = bounds.max[0] - bounds.min[0];
         let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across)).unwrap();
-        with_width(points, &bounds, &sample, width, plane)
+        with_width(points, &Seen::of(points, &bounds), &sample, width, plane)
     }
 
     #[test]
@@ -810,7 +838,8 @@ mod tests {
         }
         let bounds = Aabb::of(&points).unwrap();
         let roof = -0.005 * FAR_EDGE / 2.0;
-        assert!((slices_middle(&points, &bounds, 1.0).unwrap() - roof).abs() < 1e-9);
+        let slices = horizontal_slices(&points, &bounds);
+        assert!((slices_middle(&points, &bounds, &slices, 1.0).unwrap() - roof).abs() < 1e-9);
     }
 
     #[test]
@@ -823,8 +852,12 @@ mod tests {
         let points = extruded(&section);
         let bounds = Aabb::of(&points).unwrap();
         let whole = bounds.center()[0];
-        assert!(slices_middle(&points, &bounds, 1.0).unwrap() < whole - 0.04);
-        assert_eq!(held_back(&points, &bounds, 0.02), whole);
+        let slices = horizontal_slices(&points, &bounds);
+        assert!(slices_middle(&points, &bounds, &slices, 1.0).unwrap() < whole - 0.04);
+        assert_eq!(
+            held_back(&points, &bounds, &Seen::of(&points, &bounds), 0.02),
+            whole
+        );
     }
 
     #[test]

@@ -427,15 +427,15 @@ fn dataset_report(
             })
             .collect(),
     };
-    let all = results.to_vec();
-    for (key, ms) in groups.iter().chain([(&"all".to_string(), &all)]) {
+    let groups = groups.iter().map(|(key, ms)| (key.as_str(), ms.as_slice()));
+    for (key, ms) in groups.chain([("all", results)]) {
         let mean = mean_metrics(ms);
         table.cloud_row(&format!("{key} ({})", ms.len()), &mean, &args.metrics);
         let group = GroupReport {
             scores: Scores::of(&mean, &args.metrics),
             samples: ms.len(),
         };
-        report.groups.insert(key.clone(), group);
+        report.groups.insert(key.to_string(), group);
     }
     (report, table)
 }

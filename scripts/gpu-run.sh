@@ -21,6 +21,8 @@
 #   --losses gan|l1   the training losses: gan, train's defaults; l1, without the adversarial,
 #                     perceptual and style terms (the CPU legs 8-9 of docs/training.md found
 #                     they cost CD at 64²) [gan]
+#   --loss-depth W    weight of train's depth term (train --loss-depth; leg 11 of
+#                     docs/training.md: F1 up, the squared CD down at 64²) [0]
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
@@ -39,6 +41,7 @@ size=128
 batch=16
 lr=5e-4
 losses=gan
+loss_depth=0
 tiny=false
 while [ $# -gt 1 ]; do
     case $1 in
@@ -52,6 +55,7 @@ while [ $# -gt 1 ]; do
     --batch) batch=$2 ;;
     --lr) lr=$2 ;;
     --losses) losses=$2 ;;
+    --loss-depth) loss_depth=$2 ;;
     --tiny) tiny=true; shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
     esac
@@ -63,6 +67,7 @@ gan) loss_args=() ;;
 l1) loss_args=(--loss-adversarial 0 --loss-perceptual 0 --loss-style 0) ;;
 *) echo "error: --losses $losses: gan or l1" >&2; exit 2 ;;
 esac
+loss_args+=(--loss-depth "$loss_depth")
 out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)

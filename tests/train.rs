@@ -257,7 +257,7 @@ fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_ru
     #[rustfmt::skip]
     let options = [
         "--loss-l1", "10", "--loss-adversarial", "0.2", "--loss-perceptual", "250",
-        "--loss-style", "0.1", "--loss-bce", "1", "--loss-tv", "0.5",
+        "--loss-style", "0.1", "--loss-bce", "1", "--loss-tv", "0.5", "--loss-depth", "5",
         "--adversarial", "non-saturating", "--tv-from-stage", "1", "--val-every", "0",
         "--fusion", "early",
     ];
@@ -283,11 +283,20 @@ fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_ru
         "style",
         "occupancy",
         "tv",
+        "depth",
     ]
     .iter()
     .map(|k| loss[k].as_f64().unwrap())
     .collect();
-    assert_eq!(weights, [10.0, 0.2, 250.0, 0.1, 1.0, 0.5]);
+    assert_eq!(weights, [10.0, 0.2, 250.0, 0.1, 1.0, 0.5, 5.0]);
+    // The depth term is logged where it is weighted (a step's depth error is never exactly 0).
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    let depth = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter_map(|r| r["losses"]["depth"].as_f64())
+        .collect::<Vec<_>>();
+    assert!(!depth.is_empty() && depth.iter().all(|d| *d > 0.0), "{log}");
     assert_eq!(loss["adversarial_kind"], "non-saturating");
     assert_eq!(settings["tv_from_stage"], 1);
 }

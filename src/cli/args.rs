@@ -698,6 +698,12 @@ pub struct TrainArgs {
         train().loss.tv,
     ))]
     pub loss_tv: Option<f64>,
+    #[arg(long, help = defaulted(
+        "Weight of the depth term: smooth L1 on each occupied pixel's depth along its view's \
+         camera axis, the part of its XYZ `complete` keeps (not in the original)",
+        train().loss.depth,
+    ))]
+    pub loss_depth: Option<f64>,
     #[arg(long, value_enum, help = defaulted(
         "Adversarial loss",
         train().loss.adversarial_kind.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),

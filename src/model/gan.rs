@@ -37,6 +37,8 @@ pub struct Gan {
     /// Frozen VGG19 features for the perceptual and style terms; the discriminator's features
     /// when absent.
     pub vgg: Option<Vgg19>,
+    /// The views' camera axes (`loss::depth_axes`) for the depth term; it is zero without them.
+    pub depth_axes: Option<Tensor<5>>,
     optim: GanOptimConfig,
     g_optim: ModuleOptimizer,
     d_optim: ModuleOptimizer,
@@ -123,6 +125,9 @@ pub struct StepLosses {
     pub style: f32,
     pub occupancy: f32,
     pub tv: f32,
+    /// Absent from logs written before the term existed.
+    #[serde(default)]
+    pub depth: f32,
 }
 
 impl Gan {
@@ -158,6 +163,7 @@ impl Gan {
             config,
             weights,
             vgg: None,
+            depth_axes: None,
             g_optim: adam.init(),
             d_optim: adam.init(),
             optim,
@@ -224,6 +230,7 @@ impl Gan {
                 &judge,
                 &real_features,
                 self.vgg.as_ref(),
+                self.depth_axes.as_ref(),
                 &self.weights,
             );
             clock.done(StepPhase::GeneratorLoss);
@@ -244,6 +251,7 @@ impl Gan {
                 style: value(g.style),
                 occupancy: value(g.occupancy),
                 tv: value(g.tv),
+                depth: value(g.depth),
             });
         }
         self.discriminator = self.d_optim.step(
@@ -324,7 +332,7 @@ impl StepLosses {
     }
 
     /// Every term by name, in a fixed order.
-    pub fn terms(&self) -> [(&'static str, f32); 8] {
+    pub fn terms(&self) -> [(&'static str, f32); 9] {
         [
             ("discriminator", self.discriminator),
             ("generator", self.generator),
@@ -334,10 +342,11 @@ impl StepLosses {
             ("style", self.style),
             ("occupancy", self.occupancy),
             ("tv", self.tv),
+            ("depth", self.depth),
         ]
     }
 
-    fn terms_mut(&mut self) -> [&mut f32; 8] {
+    fn terms_mut(&mut self) -> [&mut f32; 9] {
         [
             &mut self.discriminator,
             &mut self.generator,
@@ -347,6 +356,7 @@ impl StepLosses {
             &mut self.style,
             &mut self.occupancy,
             &mut self.tv,
+            &mut self.depth,
         ]
     }
 
@@ -449,7 +459,7 @@ mod tests {
         // A backward pass consumes its graph: each count runs the generator anew.
         let count = |judge: &Discriminator| {
             let output = gan.generator.forward(input.clone());
-            let g = generator_losses(&output, &target, judge, &features, None, &gan.weights);
+            let g = generator_losses(&output, &target, judge, &features, None, None, &gan.weights);
             let mut grads = g.total.backward();
             let d = GradientsParams::from_module(&mut grads, &gan.discriminator).len();
             let g = GradientsParams::from_module(&mut grads, &gan.generator).len();

@@ -4,9 +4,10 @@
 
 use super::vgg::{as_rgb, Vgg19, PERCEPTUAL_LAYERS, STYLE_LAYERS};
 use super::{Discriminator, GeneratorOutput};
+use crate::core::camera::Camera;
 use burn::config::Config;
 use burn::tensor::activation::relu;
-use burn::tensor::Tensor;
+use burn::tensor::{Device, Tensor, TensorData};
 use clap::ValueEnum;
 use serde::{Deserialize, Serialize};
 
@@ -28,6 +29,13 @@ pub struct LossWeights {
     /// Total variation of the geometry planes, further divided by the image side `S`.
     #[config(default = 0.1)]
     pub tv: f64,
+    /// Smooth L1 on each occupied pixel's depth along its camera's axis, divided by the
+    /// foreground fraction. Not the original's: `complete` keeps only that depth of a completed
+    /// pixel's XYZ (it moves the point onto the pixel's ray, `snap_to_rays`), so this term
+    /// weighs the error that reaches the cloud, which the L1 on XYZ mixes with the two
+    /// components across the ray.
+    #[config(default = 0.0)]
+    pub depth: f64,
     #[config(default = "Adversarial::Hinge")]
     pub adversarial_kind: Adversarial,
 }
@@ -142,6 +150,33 @@ pub fn discriminator_input(images: Tensor<5>, occupancy: Tensor<5>) -> Tensor<4>
     Tensor::cat(vec![images * occupancy.clone(), occupancy], 2).reshape([b * v, c + 1, s, s])
 }
 
+/// Each view's camera axis in the XYZ planes' coordinates: a pixel's depth is the dot product
+/// of its XYZ with its view's axis (plus a constant, which differences cancel). The planes hold
+/// the coordinates scaled by one factor and shifted, so the axes are the cameras' own.
+///
+/// # Shapes
+/// → `[1, V, 3, 1, 1]`
+pub fn depth_axes(cameras: &[Camera], device: &Device) -> Tensor<5> {
+    let axes: Vec<f32> = cameras
+        .iter()
+        .flat_map(|c| (0..3).map(|k| c.rotation[(2, k)] as f32))
+        .collect();
+    Tensor::from_data(TensorData::new(axes, [1, cameras.len(), 3, 1, 1]), device)
+}
+
+/// Smooth L1 between the predicted and the true depth of the pixels the target occupies,
+/// divided by the foreground fraction as the L1 term is.
+///
+/// # Shapes
+/// `images`, `target.images`: `[B, V, C, S, S]` (C ≥ 3, XYZ first); `axes`: `[1, V, 3, 1, 1]`
+pub fn depth_l1(images: Tensor<5>, target: &Target, axes: Tensor<5>) -> Tensor<1> {
+    let error = images.narrow(2, 0, 3) - target.images.clone().narrow(2, 0, 3);
+    // [B, V, 1, S, S]: the error's component along each view's axis, where the target has a point.
+    let along = (error * axes).sum_dim(2) * target.occupancy.clone();
+    let foreground = target.occupancy.clone().mean().clamp_min(1e-3).detach();
+    smooth_l1(along.clone(), along.zeros_like()) / foreground
+}
+
 /// One training sample's ground truth.
 #[derive(Debug, Clone)]
 pub struct Target {
@@ -159,6 +194,7 @@ pub struct GeneratorLosses {
     pub style: Tensor<1>,
     pub occupancy: Tensor<1>,
     pub tv: Tensor<1>,
+    pub depth: Tensor<1>,
     pub total: Tensor<1>,
 }
 
@@ -166,12 +202,14 @@ pub struct GeneratorLosses {
 /// is divided by the foreground fraction as the original does, so sparse objects weigh the
 /// same as dense ones. `real_features` are the discriminator's features of the real views
 /// (constants), which the perceptual and style terms compare against when no VGG19 is given.
+/// The depth term needs the views' `depth_axes`; without them it is zero.
 pub fn generator_losses(
     output: &GeneratorOutput,
     target: &Target,
     discriminator: &Discriminator,
     real_features: &[Tensor<4>],
     vgg: Option<&Vgg19>,
+    depth_axes: Option<&Tensor<5>>,
     weights: &LossWeights,
 ) -> GeneratorLosses {
     let [b, v, _, s, _] = output.images.dims();
@@ -216,13 +254,18 @@ pub fn generator_losses(
         .narrow(2, 0, 3)
         .reshape([b * v, 3, s, s]);
     let tv = total_variation(geometry);
+    let depth = match depth_axes {
+        Some(axes) => depth_l1(output.images.clone(), target, axes.clone()),
+        None => l1.zeros_like(),
+    };
 
     let total = l1.clone().mul_scalar(weights.l1)
         + adversarial.clone().mul_scalar(weights.adversarial)
         + perceptual.clone().mul_scalar(weights.perceptual)
         + style.clone().mul_scalar(weights.style)
         + occupancy.clone().mul_scalar(weights.occupancy)
-        + tv.clone().mul_scalar(weights.tv / s as f64);
+        + tv.clone().mul_scalar(weights.tv / s as f64)
+        + depth.clone().mul_scalar(weights.depth);
     GeneratorLosses {
         l1,
         adversarial,
@@ -230,6 +273,7 @@ pub fn generator_losses(
         style,
         occupancy,
         tv,
+        depth,
         total,
     }
 }
@@ -237,7 +281,7 @@ pub fn generator_losses(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::tensor::{Device, TensorData};
+    use burn::tensor::TensorData;
     use std::f64::consts::LN_2;
     use std::slice;
 
@@ -320,6 +364,46 @@ mod tests {
             13.0 / 4.0,
         );
         close(scalar(perceptual(&[f], &[zero])), 2.5);
+    }
+
+    fn t5(values: &[f32], shape: [usize; 5]) -> Tensor<5> {
+        Tensor::from_data(TensorData::new(values.to_vec(), shape), &Device::flex())
+    }
+
+    #[test]
+    fn depth_counts_only_the_error_along_the_axis_where_the_target_has_a_point() {
+        let axes = t5(&[0.0, 0.0, 1.0], [1, 1, 3, 1, 1]);
+        // Two pixels, planes X, Y, Z; the target at 0.5 everywhere.
+        let target = |occupied: [f32; 2]| Target {
+            images: t5(&[0.5; 6], [1, 1, 3, 1, 2]),
+            occupancy: t5(&occupied, [1, 1, 1, 1, 2]),
+        };
+        // Pixel 0 is off by 0.4 across the axis only, pixel 1 by 0.3 along it: 0.3²/2 over 2 pixels.
+        let pred = t5(&[0.9, 0.5, 0.1, 0.5, 0.5, 0.8], [1, 1, 3, 1, 2]);
+        close(
+            scalar(depth_l1(pred.clone(), &target([1.0, 1.0]), axes.clone())),
+            0.0225,
+        );
+        // Without a point at pixel 1 nothing is left, whatever is predicted there.
+        close(scalar(depth_l1(pred, &target([1.0, 0.0]), axes)), 0.0);
+    }
+
+    #[test]
+    fn depth_axes_are_the_cameras_viewing_directions() {
+        let cameras = Camera::set(&crate::core::camera::DEFAULT_VIEWS, 64).unwrap();
+        let axes = depth_axes(&cameras, &Device::flex());
+        assert_eq!(axes.dims(), [1, 4, 3, 1, 1]);
+        let axes = axes.into_data().try_into_vec::<f32>().unwrap();
+        for (camera, axis) in cameras.iter().zip(axes.chunks(3)) {
+            let p = nalgebra::Vector3::new(0.1, -0.2, 0.3);
+            let depth = (camera.rotation * p + camera.translation)[2];
+            let along = axis
+                .iter()
+                .zip(p.iter())
+                .map(|(a, b)| *a as f64 * b)
+                .sum::<f64>();
+            close(along + camera.translation[2], depth);
+        }
     }
 
     #[test]

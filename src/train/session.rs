@@ -12,6 +12,7 @@ use super::{
 use crate::core::camera::Camera;
 use crate::io::atomic_write;
 use crate::model::gan::Gan;
+use crate::model::loss::depth_axes;
 use crate::model::vgg::Vgg19;
 use burn::tensor::Device;
 use std::path::PathBuf;
@@ -67,6 +68,9 @@ impl<'a> Session<'a> {
         std::fs::create_dir_all(run).map_err(io_err(run))?;
         let (mut gan, state) = open_or_resume(job, &autodiff, monitor)?;
         gan.vgg = vgg;
+        if settings.loss.depth > 0.0 {
+            gan.depth_axes = Some(depth_axes(&cameras, &autodiff));
+        }
         write_json(&run.join(CONFIG_FILE), &job.model)?;
         write_json(&run.join(SETTINGS_FILE), settings)?;
 

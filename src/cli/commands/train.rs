@@ -64,6 +64,7 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
         (&mut loss.style, args.loss_style),
         (&mut loss.occupancy, args.loss_bce),
         (&mut loss.tv, args.loss_tv),
+        (&mut loss.depth, args.loss_depth),
     ] {
         *weight = arg.unwrap_or(*weight);
     }

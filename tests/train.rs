@@ -323,6 +323,16 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
             .failure()
             .stderr(predicate::str::contains(said));
     }
+    // A run saved before a setting existed resumes with that setting's default.
+    let settings = run.join("train.json");
+    let mut saved: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&settings).unwrap()).unwrap();
+    saved["loss"].as_object_mut().unwrap().remove("depth");
+    std::fs::write(&settings, saved.to_string()).unwrap();
+    train(&run, 2, &[]).arg("--resume").assert().success();
+    let resumed: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&settings).unwrap()).unwrap();
+    assert_eq!(resumed["loss"]["depth"], 0.0);
     // Rendering views larger than the data's leaves holes: said, not refused.
     base(&dir.path().join("larger"))
         .args([

@@ -22,7 +22,7 @@
 #                     perceptual and style terms (the CPU legs 8-9 of docs/training.md found
 #                     they cost CD at 64²) [gan]
 #   --loss-depth W    weight of train's depth term (train --loss-depth; leg 11 of
-#                     docs/training.md: F1 up, the squared CD down at 64²) [0]
+#                     docs/training.md: F1 up, the squared CD worse at 64²) [0]
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the

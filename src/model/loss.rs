@@ -173,8 +173,7 @@ pub fn depth_l1(images: Tensor<5>, target: &Target, axes: Tensor<5>) -> Tensor<1
     let error = images.narrow(2, 0, 3) - target.images.clone().narrow(2, 0, 3);
     // [B, V, 1, S, S]: the error's component along each view's axis, where the target has a point.
     let along = (error * axes).sum_dim(2) * target.occupancy.clone();
-    let foreground = target.occupancy.clone().mean().clamp_min(1e-3).detach();
-    smooth_l1(along.clone(), along.zeros_like()) / foreground
+    smooth_l1(along.clone(), along.zeros_like()) / target.foreground()
 }
 
 /// One training sample's ground truth.
@@ -184,6 +183,14 @@ pub struct Target {
     pub images: Tensor<5>,
     /// `[B, V, 1, S, S]`, 1 where occupied.
     pub occupancy: Tensor<5>,
+}
+
+impl Target {
+    /// The occupied share of the pixels (at least 1e-3), a constant that per-pixel terms are
+    /// divided by so that sparse objects weigh the same as dense ones.
+    pub fn foreground(&self) -> Tensor<1> {
+        self.occupancy.clone().mean().clamp_min(1e-3).detach()
+    }
 }
 
 /// The generator's loss terms, unweighted, and their weighted sum.
@@ -213,8 +220,7 @@ pub fn generator_losses(
     weights: &LossWeights,
 ) -> GeneratorLosses {
     let [b, v, _, s, _] = output.images.dims();
-    let foreground = target.occupancy.clone().mean().clamp_min(1e-3).detach();
-    let l1 = smooth_l1(output.images.clone(), target.images.clone()) / foreground;
+    let l1 = smooth_l1(output.images.clone(), target.images.clone()) / target.foreground();
     let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
 
     let probability = burn::tensor::activation::sigmoid(output.occupancy.clone());

@@ -42,12 +42,12 @@ fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> 
     serde_json::from_str(&text).with_context(|| format!("{}: unreadable", path.display()))
 }
 
-/// The run's settings, those it was saved without taken from `defaults`: a run started before
-/// a setting existed ran as its default (the depth term's weight, for one, was 0 before it could
+/// The run's settings, those it was saved without at their defaults: a run started before a
+/// setting existed ran as its default (the depth term's weight, for one, was 0 before it could
 /// be set).
-fn read_saved_settings(path: &Path, defaults: &TrainSettings) -> anyhow::Result<TrainSettings> {
+fn read_saved_settings(path: &Path) -> anyhow::Result<TrainSettings> {
     let mut saved: Value = read_saved(path)?;
-    fill_missing(&mut saved, &serde_json::to_value(defaults)?);
+    fill_missing(&mut saved, &serde_json::to_value(TrainSettings::default())?);
     serde_json::from_value(saved).with_context(|| format!("{}: unreadable", path.display()))
 }
 
@@ -157,7 +157,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         }
     };
     let (settings, mut model) = if args.resume {
-        let saved = read_saved_settings(&run.join(SETTINGS_FILE), &TrainSettings::default())?;
+        let saved = read_saved_settings(&run.join(SETTINGS_FILE))?;
         let saved_model: ModelConfig = read_saved(&run.join(CONFIG_FILE))?;
         let settings = apply(args, saved.clone());
         if let Some(diff) = first_difference(&saved, &settings, &OPERATIONAL) {

@@ -2,7 +2,9 @@
 # Judges a training relay leg on the validation split: the leg's generator against the built-in
 # one, the network alone (`--no-keep-input --no-symmetry`) and the whole `complete` pipeline,
 # each scored by `mvpcc eval --tau 0.01`. A leg replaces the built-in model only if it is better
-# in both (docs/training.md). Never run on the test split: choices are made here.
+# in both (docs/training.md). `--method mirror` is scored too: issue #20 asks the pipeline to beat
+# it in every category × protocol cell (the `cell` rows). Never run on the test split: choices
+# are made here.
 #
 #   scripts/judge-leg.sh MODEL [MVPCC]     MODEL: a generator file or a run directory
 #
@@ -16,6 +18,12 @@ val=target/valset
 [ -e "$val/manifest.json" ] ||
     "$mvpcc" -q prepare --synth 150 --seed 8 --split 0 --samples 2 --size 64 --gt-size 256 \
         --clouds test --out "$val"
+out=target/judge/mirror
+rm -rf "$out"
+"$mvpcc" -q complete --input-dir "$val/clouds/test" --include 'partial_*.ply' --output-dir "$out" \
+    --method mirror
+echo "== mirror image"
+"$mvpcc" eval --data "$val" --pred-dir "$out" --tau 0.01
 for who in built-in leg; do
     model_args=()
     [ $who = built-in ] || model_args=(--model "$model")

@@ -62,6 +62,34 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// An `eval --data` report's category × protocol cells hold every sample once, each cell's F1
+/// the mean of its samples'.
+fn assert_cells_average_their_samples(report: &serde_json::Value) {
+    let f1 = |v: &serde_json::Value| v["fscore"][0]["f1"].as_f64().unwrap();
+    let mut cells: std::collections::BTreeMap<String, Vec<f64>> = Default::default();
+    for sample in report["samples"].as_array().unwrap() {
+        let category = sample["name"].as_str().unwrap().split('/').next().unwrap();
+        let key = format!("cell {category} / {}", sample["protocol"].as_str().unwrap());
+        cells.entry(key).or_default().push(f1(sample));
+    }
+    let groups = report["groups"].as_object().unwrap();
+    let reported = groups.keys().filter(|k| k.starts_with("cell ")).count();
+    assert_eq!(reported, cells.len(), "{groups:?}");
+    for (key, f1s) in cells {
+        let group = &groups[&key];
+        assert_eq!(
+            group["samples"].as_u64().unwrap() as usize,
+            f1s.len(),
+            "{key}"
+        );
+        let mean = f1s.iter().sum::<f64>() / f1s.len() as f64;
+        assert!(
+            (f1(group) - mean).abs() < 1e-9,
+            "{key}: {group:?} against {mean}"
+        );
+    }
+}
+
 #[test]
 fn eval_reproduces_the_reference_fixture() {
     let dir = TempDir::new().unwrap();
@@ -798,6 +826,7 @@ fn prepare_synth_writes_the_original_layout_resumes_and_refuses_other_settings()
     assert!(f1(&scores[0]) > 0.0 && f1(&scores[1]) > 0.0, "{scores:?}");
     // A partial covers a coarse ground truth no better than the fine one it was sampled from.
     assert_ne!(f1(&scores[0]), f1(&scores[1]));
+    assert_cells_average_their_samples(&scores[0]);
     // A second run finds everything done.
     run(&[])
         .success()

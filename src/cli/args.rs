@@ -146,7 +146,8 @@ pub struct EvalArgs {
     pub pred_dir: Option<PathBuf>,
     /// A data directory from `mvpcc prepare`: score --pred-dir's completions of its test
     /// partials against their ground truth (scanner partials turned back into the object's
-    /// frame), with means per category and per partial protocol.
+    /// frame), with means per category, per partial protocol, per category × protocol cell
+    /// (`cell car / scanner`) and overall.
     #[arg(long, requires = "pred_dir", conflicts_with = "gt_dir")]
     pub data: Option<PathBuf>,
     /// With --data: the fine ground truth (gt.ply, every point the rig saw) or the paper's

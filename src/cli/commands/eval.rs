@@ -391,8 +391,19 @@ fn score_sample(sample: &DataSample, tau: &[f64], log: Log) -> anyhow::Result<Cl
     Ok(compare_clouds(&turned, &gt.positions, tau))
 }
 
-/// The report and table of a data directory's scores: every sample, the mean of each category
-/// and protocol, and of all.
+/// The groups a sample's scores are averaged in: its category, its protocol and their cell (the
+/// unit the quality criteria compare per), keyed so that a sorted table lists the three kinds
+/// apart.
+fn group_keys(category: &str, protocol: &str) -> [String; 3] {
+    [
+        format!("category {category}"),
+        format!("cell {category} / {protocol}"),
+        format!("protocol {protocol}"),
+    ]
+}
+
+/// The report and table of a data directory's scores: every sample, the mean of each category,
+/// protocol and category × protocol cell, and of all.
 fn dataset_report(
     data: &Path,
     pred_dir: &Path,
@@ -402,10 +413,7 @@ fn dataset_report(
 ) -> (DatasetReport, Table) {
     let mut groups: BTreeMap<String, Vec<CloudMetrics>> = BTreeMap::new();
     for (s, m) in samples.iter().zip(results) {
-        for key in [
-            format!("category {}", s.category),
-            format!("protocol {}", s.protocol),
-        ] {
+        for key in group_keys(&s.category, s.protocol) {
             groups.entry(key).or_default().push(m.clone());
         }
     }

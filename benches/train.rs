@@ -1,6 +1,7 @@
 //! Training step time on the CPU (flex) for one object (all views) per step: the generator
-//! with smooth L1 and Adam alone (the shape of the PyTorch figures the issue quotes) and the
-//! full GAN step (discriminator, every loss term, both optimizers). Also what the loader
+//! with smooth L1 and Adam alone (the shape of the PyTorch figures the issue quotes), the
+//! full GAN step (discriminator, every loss term, both optimizers) and the GAN step with the
+//! reconstruction terms alone, which leaves the discriminator out. Also what the loader
 //! spends rendering one step's samples, to check it stays out of the step's way.
 //! `MVPCC_BENCH_PAPER=1` adds the paper's shape (minutes per sample).
 
@@ -23,6 +24,15 @@ fn presets() -> Vec<Preset> {
         p.push(Preset::Paper);
     }
     p
+}
+
+/// The relay legs' losses (`train --loss-adversarial 0 --loss-perceptual 0 --loss-style 0`):
+/// no term needs the discriminator, so the step runs the generator alone.
+fn reconstruction() -> LossWeights {
+    LossWeights::new()
+        .with_adversarial(0.0)
+        .with_perceptual(0.0)
+        .with_style(0.0)
 }
 
 fn training_step(c: &mut Criterion) {
@@ -65,6 +75,19 @@ fn training_step(c: &mut Criterion) {
                 losses
             })
         });
+
+        let mut relay =
+            Some(Gan::new(config, reconstruction(), GanOptimConfig::new(), &device).unwrap());
+        group.bench_function(
+            format!("{name}: GAN step, reconstruction terms only"),
+            |b| {
+                b.iter(|| {
+                    let (next, losses) = relay.take().unwrap().step(&micro, 1e-4);
+                    relay = Some(next);
+                    losses
+                })
+            },
+        );
     }
     group.finish();
 }

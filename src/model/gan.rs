@@ -4,7 +4,7 @@
 
 use super::loss::{discriminator_input, discriminator_loss, generator_losses, LossWeights, Target};
 use super::vgg::Vgg19;
-use super::{ConfigError, Discriminator, Generator, ModelConfig};
+use super::{ConfigError, Discriminator, Generator, GeneratorOutput, ModelConfig};
 use burn::config::Config;
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
@@ -191,36 +191,19 @@ impl Gan {
         let mut d_grads = GradientsAccumulator::<Discriminator>::new();
         let mut g_grads = GradientsAccumulator::<Generator>::new();
         let mut sum = StepLosses::default();
+        let game = self.weights.needs_discriminator(self.vgg.is_some());
         for batch in micro {
             let output = self.generator.forward(batch.input.clone());
             clock.done(StepPhase::GeneratorForward);
             let target = &batch.target;
-            let fake =
-                discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone()))
-                    .detach();
-            // One pass over the real views serves both losses: its logits train the
-            // discriminator, its features (as constants) are what the generator's perceptual
-            // and style terms compare against.
-            let real = self.discriminator.forward(discriminator_input(
-                target.images.clone(),
-                target.occupancy.clone(),
-            ));
-            let real_features: Vec<Tensor<4>> =
-                real.features.iter().map(|f| f.clone().detach()).collect();
-            let d_loss = discriminator_loss(
-                self.weights.adversarial_kind,
-                real.logits,
-                self.discriminator.forward(fake).logits,
-            );
-            clock.done(StepPhase::DiscriminatorLoss);
-            d_grads.accumulate(
-                &self.discriminator,
-                GradientsParams::from_grads(
-                    d_loss.clone().mul_scalar(share).backward(),
-                    &self.discriminator,
-                ),
-            );
-            clock.done(StepPhase::DiscriminatorBackward);
+            let (d_loss, real_features) = match game {
+                true => self.discriminator_step(&output, target, share, &mut d_grads, clock),
+                false => {
+                    clock.done(StepPhase::DiscriminatorLoss);
+                    clock.done(StepPhase::DiscriminatorBackward);
+                    (0.0, Vec::new())
+                }
+            };
             // The generator's loss flows through the discriminator but must not train it: a copy
             // whose weights record no gradient spares the backward pass their gradients.
             let judge = self.discriminator.clone().no_grad();
@@ -243,7 +226,7 @@ impl Gan {
             );
             clock.done(StepPhase::GeneratorBackward);
             sum = sum.plus(&StepLosses {
-                discriminator: value(d_loss),
+                discriminator: d_loss,
                 generator: value(g.total),
                 l1: value(g.l1),
                 adversarial: value(g.adversarial),
@@ -254,16 +237,54 @@ impl Gan {
                 depth: value(g.depth),
             });
         }
-        self.discriminator = self.d_optim.step(
-            learning_rate * self.optim.d_to_g_rate,
-            self.discriminator,
-            d_grads.grads(),
-        );
+        if game {
+            self.discriminator = self.d_optim.step(
+                learning_rate * self.optim.d_to_g_rate,
+                self.discriminator,
+                d_grads.grads(),
+            );
+        }
         self.generator = self
             .g_optim
             .step(learning_rate, self.generator, g_grads.grads());
         clock.done(StepPhase::Optimizers);
         (self, sum.scaled(share as f32))
+    }
+
+    /// The discriminator's loss on one batch, its gradients accumulated into `d_grads` with
+    /// `share` of the step's weight, and its features of the real views. One pass over the real
+    /// views serves both networks: its logits train the discriminator, its features (as
+    /// constants) are what the generator's perceptual and style terms compare against.
+    fn discriminator_step<C: StepClock>(
+        &self,
+        output: &GeneratorOutput,
+        target: &Target,
+        share: f64,
+        d_grads: &mut GradientsAccumulator<Discriminator>,
+        clock: &mut C,
+    ) -> (f32, Vec<Tensor<4>>) {
+        let fake =
+            discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone())).detach();
+        let real = self.discriminator.forward(discriminator_input(
+            target.images.clone(),
+            target.occupancy.clone(),
+        ));
+        let real_features = real.features.iter().map(|f| f.clone().detach()).collect();
+        let d_loss = discriminator_loss(
+            self.weights.adversarial_kind,
+            real.logits,
+            self.discriminator.forward(fake).logits,
+        );
+        clock.done(StepPhase::DiscriminatorLoss);
+        d_grads.accumulate(
+            &self.discriminator,
+            GradientsParams::from_grads(
+                d_loss.clone().mul_scalar(share).backward(),
+                &self.discriminator,
+            ),
+        );
+        clock.done(StepPhase::DiscriminatorBackward);
+        (value(d_loss), real_features)
     }
 
     /// Both optimizers' state (Adam moments and step counts), generator's first, in Burn's
@@ -411,8 +432,13 @@ mod tests {
     }
 
     fn train(weights: LossWeights, steps: usize) -> (Gan, Vec<StepLosses>) {
-        let (mut gan, device) = tiny_gan(weights, 7);
-        let (input, target) = sample(&device);
+        let (gan, device) = tiny_gan(weights, 7);
+        train_gan(gan, &device, steps)
+    }
+
+    /// `steps` steps of `gan` on [`sample`].
+    fn train_gan(mut gan: Gan, device: &Device, steps: usize) -> (Gan, Vec<StepLosses>) {
+        let (input, target) = sample(device);
         let batch = [Batch { input, target }];
         let mut history = Vec::new();
         for _ in 0..steps {
@@ -471,6 +497,33 @@ mod tests {
         let (d_live, g_live) = count(&gan.discriminator);
         assert!(d_live > 0 && g_live > 0);
         assert_eq!((d_frozen, g_frozen), (0, g_live));
+    }
+
+    #[test]
+    fn without_terms_that_need_it_the_discriminator_is_neither_run_nor_trained() {
+        // Judged without autodiff, so judging advances no power iteration.
+        let judged = |gan: &Gan| {
+            let (_, target) = sample(&Device::flex());
+            let real = discriminator_input(target.images, target.occupancy);
+            gan.discriminator.valid().forward(real).logits.into_data()
+        };
+        let l1_only = LossWeights::new()
+            .with_adversarial(0.0)
+            .with_perceptual(0.0)
+            .with_style(0.0);
+        for (weights, game) in [(LossWeights::new(), true), (l1_only, false)] {
+            let (gan, device) = tiny_gan(weights, 7);
+            let initial = judged(&gan);
+            let (gan, history) = train_gan(gan, &device, 6);
+            assert_eq!(judged(&gan) != initial, game);
+            let played = |l: &StepLosses| [l.discriminator, l.adversarial, l.perceptual, l.style];
+            assert_eq!(
+                history.iter().all(|l| played(l).iter().all(|&t| t != 0.0)),
+                game,
+                "{history:?}"
+            );
+            falls(&history, "L1", 0.5, |l| l.l1);
+        }
     }
 
     #[test]

@@ -40,6 +40,20 @@ pub struct LossWeights {
     pub adversarial_kind: Adversarial,
 }
 
+impl LossWeights {
+    /// Whether the generator's loss involves the discriminator: through the adversarial term,
+    /// or the perceptual and style terms when they compare the discriminator's features (no
+    /// VGG19). Without it a training step neither runs nor trains the discriminator, whose
+    /// passes would only feed terms weighted zero.
+    pub fn needs_discriminator(&self, vgg: bool) -> bool {
+        self.adversarial != 0.0 || (!vgg && self.compares_features())
+    }
+
+    fn compares_features(&self) -> bool {
+        self.perceptual != 0.0 || self.style != 0.0
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
 #[serde(rename_all = "kebab-case")]
 pub enum Adversarial {
@@ -209,7 +223,9 @@ pub struct GeneratorLosses {
 /// is divided by the foreground fraction as the original does, so sparse objects weigh the
 /// same as dense ones. `real_features` are the discriminator's features of the real views
 /// (constants), which the perceptual and style terms compare against when no VGG19 is given.
-/// The depth term needs the views' `depth_axes`; without them it is zero.
+/// The depth term needs the views' `depth_axes`; without them it is zero. The adversarial,
+/// perceptual and style terms are left at zero, not computed, when their weights are zero, and
+/// the discriminator runs only when one of them needs it ([`LossWeights::needs_discriminator`]).
 pub fn generator_losses(
     output: &GeneratorOutput,
     target: &Target,
@@ -223,14 +239,22 @@ pub fn generator_losses(
     let l1 = smooth_l1(output.images.clone(), target.images.clone()) / target.foreground();
     let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
 
+    let zero = || l1.zeros_like();
     let probability = burn::tensor::activation::sigmoid(output.occupancy.clone());
-    let fake = discriminator.forward(discriminator_input(
-        output.images.clone(),
-        probability.clone(),
-    ));
-    let adversarial = generator_adversarial(weights.adversarial_kind, fake.logits);
-    let (perceptual, style) = match vgg {
-        Some(vgg) => {
+    let fake = weights.needs_discriminator(vgg.is_some()).then(|| {
+        discriminator.forward(discriminator_input(
+            output.images.clone(),
+            probability.clone(),
+        ))
+    });
+    let adversarial = match &fake {
+        Some(fake) if weights.adversarial != 0.0 => {
+            generator_adversarial(weights.adversarial_kind, fake.logits.clone())
+        }
+        _ => zero(),
+    };
+    let (perceptual, style) = match (weights.compares_features(), vgg, &fake) {
+        (true, Some(vgg), _) => {
             let fake = vgg.forward(as_rgb(output.images.clone() * probability));
             let real: Vec<Tensor<4>> = vgg
                 .forward(as_rgb(target.images.clone() * target.occupancy.clone()))
@@ -248,10 +272,11 @@ pub fn generator_losses(
                 self::style(&pick(&fake, &STYLE_LAYERS), &pick(&real, &STYLE_LAYERS)),
             )
         }
-        None => (
+        (true, None, Some(fake)) => (
             self::perceptual(&fake.features, real_features),
             self::style(&fake.features, real_features),
         ),
+        _ => (zero(), zero()),
     };
 
     let geometry = output
@@ -262,7 +287,7 @@ pub fn generator_losses(
     let tv = total_variation(geometry);
     let depth = match depth_axes {
         Some(axes) => depth_l1(output.images.clone(), target, axes.clone()),
-        None => l1.zeros_like(),
+        None => zero(),
     };
 
     let total = l1.clone().mul_scalar(weights.l1)

@@ -204,8 +204,9 @@ impl Gan {
                     (0.0, Vec::new())
                 }
             };
-            // The generator's loss flows through the discriminator but must not train it: a copy
-            // whose weights record no gradient spares the backward pass their gradients.
+            // Where a term needs it, the generator's loss flows through the discriminator but
+            // must not train it: a copy whose weights record no gradient spares the backward
+            // pass their gradients.
             let judge = self.discriminator.clone().no_grad();
             let g = generator_losses(
                 &output,

@@ -18,23 +18,21 @@ val=target/valset
 [ -e "$val/manifest.json" ] ||
     "$mvpcc" -q prepare --synth 150 --seed 8 --split 0 --samples 2 --size 64 --gt-size 256 \
         --clouds test --out "$val"
-out=target/judge/mirror
-rm -rf "$out"
-"$mvpcc" -q complete --input-dir "$val/clouds/test" --include 'partial_*.ply' --output-dir "$out" \
-    --method mirror
-echo "== mirror image"
-"$mvpcc" eval --data "$val" --pred-dir "$out" --tau 0.01
+# Completes the validation partials into target/judge/NAME with the given `complete` options and
+# scores them.
+judge() {
+    local name=$1 out=target/judge/$1
+    shift
+    rm -rf "$out"
+    "$mvpcc" -q complete --input-dir "$val/clouds/test" --include 'partial_*.ply' \
+        --output-dir "$out" "$@"
+    echo "== $name"
+    "$mvpcc" eval --data "$val" --pred-dir "$out" --tau 0.01
+}
+judge mirror --method mirror
 for who in built-in leg; do
     model_args=()
     [ $who = built-in ] || model_args=(--model "$model")
-    for mode in alone pipeline; do
-        mode_args=()
-        [ $mode = pipeline ] || mode_args=(--no-keep-input --no-symmetry)
-        out=target/judge/$mode-$who
-        rm -rf "$out"
-        "$mvpcc" -q complete --input-dir "$val/clouds/test" --include 'partial_*.ply' \
-            --output-dir "$out" "${model_args[@]}" "${mode_args[@]}"
-        echo "== $who model, $mode"
-        "$mvpcc" eval --data "$val" --pred-dir "$out" --tau 0.01
-    done
+    judge "alone-$who" "${model_args[@]}" --no-keep-input --no-symmetry
+    judge "pipeline-$who" "${model_args[@]}"
 done

@@ -307,6 +307,39 @@ fn the_built_in_model_completes_out_of_the_box() {
             "1.5 is not a probability between 0 and 1",
         ));
     assert!(!refused.exists());
+
+    // Every completed point lies within the box's side of a measured or mirrored one, so a
+    // merge distance that wide leaves the mirror's output.
+    let merged_away = dir.path().join("merged_away.ply");
+    mvpcc()
+        .args([
+            "complete",
+            s(&input),
+            s(&merged_away),
+            "--merge-distance",
+            "2",
+        ])
+        .assert()
+        .success();
+    let mirror = dir.path().join("mirror.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&mirror), "--method", "mirror"])
+        .assert()
+        .success();
+    let merged_away = read_cloud(&merged_away, None).unwrap().cloud;
+    assert_eq!(
+        merged_away.positions,
+        read_cloud(&mirror, None).unwrap().cloud.positions
+    );
+    assert!(merged_away.len() < out.len());
+    mvpcc()
+        .args(["complete", s(&input), s(&refused), "--merge-distance=-0.1"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "-0.1 is not a distance of 0 or more",
+        ));
+    assert!(!refused.exists());
 }
 
 #[test]

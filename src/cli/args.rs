@@ -327,9 +327,16 @@ pub struct CompleteArgs {
     pub no_snap: bool,
     #[command(flatten)]
     pub sor: SorOptions,
-    /// A completed point within this many model pixels of a measured one is not added.
-    #[arg(long, default_value_t = Options::default().merge_pixels)]
-    pub merge_pixels: f64,
+    /// A completed point within this distance of a measured or mirrored one is not added; a
+    /// share of the object's size (the side of the network's box: 0.0625 is 4 pixels of a 64²
+    /// view, 8 of a 128² one).
+    #[arg(
+        long,
+        value_name = "D",
+        value_parser = distance,
+        default_value_t = Options::default().merge_distance
+    )]
+    pub merge_distance: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "output_dir")]
     pub preview: Option<PathBuf>,
@@ -774,6 +781,13 @@ fn positive_length(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(w) if w.is_finite() && w > 0.0 => Ok(w),
         _ => Err(format!("{text} is not a positive length")),
+    }
+}
+
+fn distance(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(d) if d.is_finite() && d >= 0.0 => Ok(d),
+        _ => Err(format!("{text} is not a distance of 0 or more")),
     }
 }
 

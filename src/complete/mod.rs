@@ -2,8 +2,8 @@
 //!
 //! read → frame → project → inpaint → re-project (eroded) → outlier filter → merge with the
 //! measured points → back to the input's frame. The measured points are kept exactly; completed
-//! points are added only where no measured point lies within `merge_pixels` model pixels, and
-//! carry a `synthetic` flag so a user can tell them apart.
+//! points are added only where no measured point lies within `merge_distance` (in the network's
+//! box, so the same for every view size), and carry a `synthetic` flag so a user can tell them apart.
 //!
 //! Two baselines run through the same code: `identity` (the partial as it is) and `mirror` (the
 //! partial united with its mirror image across the vehicle's long vertical plane).
@@ -71,8 +71,10 @@ pub struct Options {
     /// Keep the measured points and add completed points where they are missing; otherwise
     /// the output is the network's re-projected cloud alone (the paper's output).
     pub keep_input: bool,
-    /// A completed point within this many model pixels of a measured point is not added.
-    pub merge_pixels: f64,
+    /// A completed point within this distance of a measured or mirrored point is not added, in
+    /// the network's unit box: a distance, not pixels, so that models of every view size fill
+    /// the same gaps.
+    pub merge_distance: f64,
     /// Also add the measured points' mirror images (network method; the mirror method always
     /// does).
     pub symmetry: bool,
@@ -116,7 +118,7 @@ impl Default for Options {
             snap: true,
             sor: SorParams::default(),
             keep_input: true,
-            merge_pixels: 4.0,
+            merge_distance: 0.0625,
             symmetry: true,
             symmetric_frame: true,
             keep_views: false,
@@ -367,8 +369,12 @@ pub fn complete(
         views = network.views;
         let start = Instant::now();
         if options.keep_input {
-            let tolerance = options.merge_pixels / inpainter.config().size as f64;
-            let covered = covered_by(&measured, &added, &network.predicted, tolerance);
+            let covered = covered_by(
+                &measured,
+                &added,
+                &network.predicted,
+                options.merge_distance,
+            );
             added.extend(network_points(
                 &network.predicted,
                 &measured_index,
@@ -700,7 +706,6 @@ mod tests {
         Options {
             method,
             smooth: 5,
-            merge_pixels: 2.0,
             symmetry: false,
             ..Options::default()
         }

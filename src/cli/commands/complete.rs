@@ -139,7 +139,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         snap: !args.no_snap,
         sor,
         keep_input: !args.no_keep_input,
-        merge_pixels: args.merge_pixels,
+        merge_distance: args.merge_distance,
         symmetry: !args.no_symmetry,
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),

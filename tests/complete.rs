@@ -332,6 +332,15 @@ fn the_built_in_model_completes_out_of_the_box() {
         read_cloud(&mirror, None).unwrap().cloud.positions
     );
     assert!(merged_away.len() < out.len());
+
+    // The network's box only drops points: left open, it keeps every point of the default.
+    let open = dir.path().join("open.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&open), "--box-margin", "inf"])
+        .assert()
+        .success();
+    let open = read_cloud(&open, None).unwrap().cloud;
+    assert!(out.positions.iter().all(|p| open.positions.contains(p)));
     mvpcc()
         .args(["complete", s(&input), s(&refused), "--merge-distance=-0.1"])
         .assert()

@@ -337,6 +337,15 @@ pub struct CompleteArgs {
         default_value_t = Options::default().merge_distance
     )]
     pub merge_distance: f64,
+    /// The network's points further than this outside the box of the measured points and
+    /// their mirror images are dropped; a share of the object's size, `inf` keeps them all.
+    #[arg(
+        long,
+        value_name = "M",
+        value_parser = distance,
+        default_value_t = Options::default().box_margin
+    )]
+    pub box_margin: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "output_dir")]
     pub preview: Option<PathBuf>,
@@ -786,7 +795,7 @@ fn positive_length(text: &str) -> Result<f64, String> {
 
 fn distance(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(d) if d.is_finite() && d >= 0.0 => Ok(d),
+        Ok(d) if d >= 0.0 => Ok(d),
         _ => Err(format!("{text} is not a distance of 0 or more")),
     }
 }

@@ -75,6 +75,9 @@ pub struct Options {
     /// the network's unit box: a distance, not pixels, so that models of every view size fill
     /// the same gaps.
     pub merge_distance: f64,
+    /// The network's points further than this outside the box of the measured points and
+    /// their mirror images are dropped (in the network's unit box; infinite keeps them all).
+    pub box_margin: f64,
     /// Also add the measured points' mirror images (network method; the mirror method always
     /// does).
     pub symmetry: bool,
@@ -100,6 +103,7 @@ impl Options {
             keep_input: false,
             symmetry: false,
             symmetric_frame: false,
+            box_margin: f64::INFINITY,
             ..Options::default()
         }
     }
@@ -119,6 +123,7 @@ impl Default for Options {
             sor: SorParams::default(),
             keep_input: true,
             merge_distance: 0.0625,
+            box_margin: 0.025,
             symmetry: true,
             symmetric_frame: true,
             keep_views: false,
@@ -364,8 +369,12 @@ pub fn complete(
     let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
-        let network = run_network(input, &measured, inpainter, options, &mut timings)?;
-        filtered_out = network.filtered_out;
+        let mut network = run_network(input, &measured, inpainter, options, &mut timings)?;
+        let start = Instant::now();
+        let outside =
+            drop_outside_box(&mut network.predicted, &measured, plane, options.box_margin);
+        timings.filter += start.elapsed();
+        filtered_out = network.filtered_out + outside;
         views = network.views;
         let start = Instant::now();
         if options.keep_input {
@@ -538,6 +547,38 @@ fn run_network(
         filtered_out,
         views,
     })
+}
+
+/// Drops the network's points lying more than `margin` beyond the measured points' height or
+/// beyond the width they and their mirror images span, and returns how many went (docs/
+/// completing.md, *The box*). The length is left open: a partial may lack a whole end, which
+/// the network fills. Without a plane the width is not known either.
+fn drop_outside_box(
+    predicted: &mut PointCloud,
+    measured: &[[f64; 3]],
+    plane: Option<Plane>,
+    margin: f64,
+) -> usize {
+    let images = plane
+        .into_iter()
+        .flat_map(|plane| measured.iter().map(move |&p| mirror(p, plane.offset)));
+    let Some(bounds) = Aabb::of_iter(measured.iter().copied().chain(images)) else {
+        return 0;
+    };
+    let axes = if plane.is_some() { 0..2 } else { 1..2 };
+    let keep: Vec<bool> = predicted
+        .positions
+        .iter()
+        .map(|p| {
+            axes.clone()
+                .all(|i| p[i] >= bounds.min[i] - margin && p[i] <= bounds.max[i] + margin)
+        })
+        .collect();
+    let dropped = keep.iter().filter(|&&k| !k).count();
+    if dropped > 0 {
+        *predicted = predicted.filter(&keep);
+    }
+    dropped
 }
 
 /// Per network point, whether a measured point or an added mirror image lies within
@@ -877,6 +918,49 @@ mod tests {
         };
         let alone = complete(&input, Some(&inpainter), &opts).unwrap();
         assert!(flags(&alone.cloud).iter().all(|&v| v == 1.0));
+    }
+
+    /// The width is the measured points' and their mirror images': a point beyond the measured
+    /// flank but inside the mirrored one stays; points past the margin across the width or the
+    /// height go, not along the length; without a plane only the height bounds; an infinite
+    /// margin keeps everything.
+    #[test]
+    fn network_points_outside_the_box_are_dropped() {
+        let measured = [[0.1, -0.2, -0.5], [0.3, 0.2, 0.5]];
+        let plane = Plane {
+            offset: 0.0,
+            support: 0.5,
+            tolerance: 0.01,
+            fit: crate::complete::symmetry::PlaneFit::Refined,
+        };
+        let predicted = PointCloud::from_positions(vec![
+            [-0.3, 0.0, 0.0],
+            [0.34, 0.0, 0.0],
+            [0.0, 0.26, 0.0],
+            [0.0, 0.0, -0.56],
+            [0.0, 0.0, 0.0],
+        ]);
+        let kept = |plane, margin| {
+            let mut cloud = predicted.clone();
+            let dropped = drop_outside_box(&mut cloud, &measured, plane, margin);
+            assert_eq!(dropped + cloud.len(), predicted.len());
+            cloud.positions
+        };
+        let beyond_an_end = [0.0, 0.0, -0.56];
+        let everything_but = |dropped: &[[f64; 3]]| {
+            let mut all = predicted.positions.clone();
+            all.retain(|p| !dropped.contains(p));
+            all
+        };
+        assert_eq!(kept(Some(plane), 0.05), everything_but(&[[0.0, 0.26, 0.0]]));
+        assert_eq!(kept(None, 0.05), everything_but(&[[0.0, 0.26, 0.0]]));
+        assert_eq!(
+            kept(Some(plane), 0.0),
+            everything_but(&[[0.34, 0.0, 0.0], [0.0, 0.26, 0.0]])
+        );
+        assert_eq!(kept(None, 0.0), everything_but(&[[0.0, 0.26, 0.0]]));
+        assert!(kept(Some(plane), 0.0).contains(&beyond_an_end));
+        assert_eq!(kept(None, f64::INFINITY), predicted.positions);
     }
 
     #[test]

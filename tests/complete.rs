@@ -58,6 +58,17 @@ fn write(dir: &TempDir, name: &str, cloud: &PointCloud) -> PathBuf {
     path
 }
 
+/// Completes `input` into `name` in `dir` with the extra arguments and reads the output.
+fn completed(dir: &TempDir, input: &Path, name: &str, args: &[&str]) -> PointCloud {
+    let output = dir.path().join(name);
+    mvpcc()
+        .args(["complete", s(input), s(&output)])
+        .args(args)
+        .assert()
+        .success();
+    read_cloud(&output, None).unwrap().cloud
+}
+
 fn flags(cloud: &PointCloud) -> Vec<f64> {
     cloud
         .attribute(SYNTHETIC)
@@ -176,43 +187,28 @@ fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
     let dir = TempDir::new().unwrap();
     let input_cloud = scan(5);
     let input = write(&dir, "scan.pcd", &input_cloud);
-    let identity = dir.path().join("identity.pcd");
-    mvpcc()
-        .args(["complete", s(&input), s(&identity), "--method", "identity"])
-        .assert()
-        .success();
-    let same = read_cloud(&identity, None).unwrap().cloud;
+    let same = completed(&dir, &input, "identity.pcd", &["--method", "identity"]);
     assert_eq!(same.positions, input_cloud.positions);
     assert!(flags(&same).iter().all(|&v| v == 0.0));
 
-    let mirror = dir.path().join("mirror.pcd");
-    mvpcc()
-        .args(["complete", s(&input), s(&mirror), "--method", "mirror"])
-        .assert()
-        .success();
-    assert!(read_cloud(&mirror, None).unwrap().cloud.len() > input_cloud.len());
+    let mirror = completed(&dir, &input, "mirror.pcd", &["--method", "mirror"]);
+    assert!(mirror.len() > input_cloud.len());
 
     let model = tiny_model(&dir);
-    let alone = dir.path().join("alone.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&alone), "--model", s(&model)])
-        // An untrained model's occupancy is noise that erosion would remove entirely.
-        .args(["--no-keep-input", "--erode", "0"])
-        .assert()
-        .success();
-    let alone = read_cloud(&alone, None).unwrap().cloud;
+    // An untrained model's occupancy is noise that erosion would remove entirely.
+    let untrained = ["--model", s(&model), "--no-keep-input", "--erode", "0"];
+    let alone = completed(&dir, &input, "alone.ply", &untrained);
     assert!(flags(&alone).iter().all(|&v| v == 1.0));
     assert!(overshoot(&alone.positions, &input_cloud.positions) < 6.2);
 
     // Unsnapped, the points sit where the network put them, off their pixels' rays but inside
     // the model's box: within half a car length of the scan's box.
-    let unsnapped = dir.path().join("unsnapped.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&unsnapped), "--model", s(&model)])
-        .args(["--no-keep-input", "--erode", "0", "--no-snap"])
-        .assert()
-        .success();
-    let unsnapped = read_cloud(&unsnapped, None).unwrap().cloud;
+    let unsnapped = completed(
+        &dir,
+        &input,
+        "unsnapped.ply",
+        &[&untrained[..], &["--no-snap"]].concat(),
+    );
     assert!(!unsnapped.is_empty());
     assert_ne!(unsnapped.positions, alone.positions);
     assert!(overshoot(&unsnapped.positions, &input_cloud.positions) < 2.2);
@@ -292,12 +288,8 @@ fn the_built_in_model_completes_out_of_the_box() {
     );
 
     // The built-in model's own threshold lies below one half: a stricter one adds less.
-    let strict = dir.path().join("strict.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&strict), "--occupancy", "0.9"])
-        .assert()
-        .success();
-    assert!(read_cloud(&strict, None).unwrap().cloud.len() < out.len());
+    let strict = completed(&dir, &input, "strict.ply", &["--occupancy", "0.9"]);
+    assert!(strict.len() < out.len());
     let refused = dir.path().join("refused.ply");
     mvpcc()
         .args(["complete", s(&input), s(&refused), "--occupancy", "1.5"])
@@ -310,36 +302,13 @@ fn the_built_in_model_completes_out_of_the_box() {
 
     // Every completed point lies within the box's side of a measured or mirrored one, so a
     // merge distance that wide leaves the mirror's output.
-    let merged_away = dir.path().join("merged_away.ply");
-    mvpcc()
-        .args([
-            "complete",
-            s(&input),
-            s(&merged_away),
-            "--merge-distance",
-            "2",
-        ])
-        .assert()
-        .success();
-    let mirror = dir.path().join("mirror.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&mirror), "--method", "mirror"])
-        .assert()
-        .success();
-    let merged_away = read_cloud(&merged_away, None).unwrap().cloud;
-    assert_eq!(
-        merged_away.positions,
-        read_cloud(&mirror, None).unwrap().cloud.positions
-    );
+    let merged_away = completed(&dir, &input, "merged_away.ply", &["--merge-distance", "2"]);
+    let mirror = completed(&dir, &input, "mirror.ply", &["--method", "mirror"]);
+    assert_eq!(merged_away.positions, mirror.positions);
     assert!(merged_away.len() < out.len());
 
     // The network's box only drops points: left open, it keeps every point of the default.
-    let open = dir.path().join("open.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&open), "--box-margin", "inf"])
-        .assert()
-        .success();
-    let open = read_cloud(&open, None).unwrap().cloud;
+    let open = completed(&dir, &input, "open.ply", &["--box-margin", "inf"]);
     assert!(out.positions.iter().all(|p| open.positions.contains(p)));
     mvpcc()
         .args(["complete", s(&input), s(&refused), "--merge-distance=-0.1"])

@@ -337,8 +337,9 @@ pub struct CompleteArgs {
         default_value_t = Options::default().merge_distance
     )]
     pub merge_distance: f64,
-    /// The network's points further than this outside the box of the measured points and
-    /// their mirror images are dropped; a share of the object's size, `inf` keeps them all.
+    /// The network's points further than this above or below the measured points, or beyond
+    /// the width they and their mirror images span, are dropped; a share of the object's size,
+    /// `inf` keeps them all.
     #[arg(
         long,
         value_name = "M",

@@ -20,9 +20,9 @@
 #   --lr R            first-stage learning rate [5e-4]
 #   --losses gan|l1   the training losses: gan, train's defaults; l1, without the adversarial,
 #                     perceptual and style terms (the CPU legs 8-9 of docs/training.md found
-#                     they cost CD at 64²) [gan]
-#   --loss-depth W    weight of train's depth term (train --loss-depth; leg 11 of
-#                     docs/training.md: F1 up, the squared CD worse at 64²) [0]
+#                     they cost CD; leg 12, the built-in model, trained so) [l1]
+#   --loss-depth W    weight of train's depth term (train --loss-depth; leg 12 trained with
+#                     100) [100]
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
@@ -40,8 +40,8 @@ config=cpu
 size=128
 batch=16
 lr=5e-4
-losses=gan
-loss_depth=0
+losses=l1
+loss_depth=100
 tiny=false
 while [ $# -gt 1 ]; do
     case $1 in

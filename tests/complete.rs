@@ -307,9 +307,24 @@ fn the_built_in_model_completes_out_of_the_box() {
     assert_eq!(merged_away.positions, mirror.positions);
     assert!(merged_away.len() < out.len());
 
-    // The network's box only drops points: left open, it keeps every point of the default.
-    let open = completed(&dir, &input, "open.ply", &["--box-margin", "inf"]);
-    assert!(out.positions.iter().all(|p| open.positions.contains(p)));
+    // Thinning and the network's box only drop points: unthinned, the output keeps every point
+    // of the default, and with the box left open too, every point of that.
+    let unthinned = completed(&dir, &input, "unthinned.ply", &["--thin", "0"]);
+    assert!(unthinned.len() > out.len());
+    assert!(out
+        .positions
+        .iter()
+        .all(|p| unthinned.positions.contains(p)));
+    let open = completed(
+        &dir,
+        &input,
+        "open.ply",
+        &["--thin", "0", "--box-margin", "inf"],
+    );
+    assert!(unthinned
+        .positions
+        .iter()
+        .all(|p| open.positions.contains(p)));
     mvpcc()
         .args(["complete", s(&input), s(&refused), "--merge-distance=-0.1"])
         .assert()

@@ -347,6 +347,15 @@ pub struct CompleteArgs {
         default_value_t = Options::default().box_margin
     )]
     pub box_margin: f64,
+    /// The network's added points are thinned to one per cube of this side (a share of the
+    /// object's size: 0.03125 is 2 pixels of a 64² view, 4 of a 128² one); 0 keeps them all.
+    #[arg(
+        long,
+        value_name = "D",
+        value_parser = distance,
+        default_value_t = Options::default().thin
+    )]
+    pub thin: f64,
     /// Write a PNG of input and output from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "output_dir")]
     pub preview: Option<PathBuf>,

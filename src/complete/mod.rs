@@ -14,6 +14,7 @@ pub mod filter;
 pub mod orient;
 pub mod preview;
 pub mod symmetry;
+pub mod thin;
 
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::{inliers, SorParams};
@@ -80,6 +81,9 @@ pub struct Options {
     /// the width they and their mirror images span, are dropped (in the network's unit box;
     /// infinite keeps them all).
     pub box_margin: f64,
+    /// The network's added points are thinned to one per cube of this side (in the network's
+    /// unit box; 0 keeps them all), so that every view size adds them at the same density.
+    pub thin: f64,
     /// Also add the measured points' mirror images (network method; the mirror method always
     /// does).
     pub symmetry: bool,
@@ -126,6 +130,7 @@ impl Default for Options {
             keep_input: true,
             merge_distance: 0.0625,
             box_margin: 0.025,
+            thin: 0.03125,
             symmetry: true,
             symmetric_frame: true,
             keep_views: false,
@@ -386,15 +391,13 @@ pub fn complete(
                 &network.predicted,
                 options.merge_distance,
             );
-            added.extend(network_points(
-                &network.predicted,
-                &measured_index,
-                Some(&covered),
-            ));
+            let uncovered: Vec<bool> = covered.iter().map(|c| !c).collect();
+            let fill = thinned(&network.predicted.filter(&uncovered), options.thin);
+            added.extend(network_points(&fill, &measured_index));
         } else {
             keep_input = false;
             mirrored = 0;
-            added = network_points(&network.predicted, &measured_index, None);
+            added = network_points(&network.predicted, &measured_index);
         }
         timings.reprojection += start.elapsed();
     }
@@ -583,6 +586,11 @@ fn drop_outside_box(
     dropped
 }
 
+/// The network's points thinned to one per cube of side `side` (see [`thin::one_per_cube`]).
+fn thinned(points: &PointCloud, side: f64) -> PointCloud {
+    points.select(&thin::one_per_cube(&points.positions, side))
+}
+
 /// Per network point, whether a measured point or an added mirror image lies within
 /// `tolerance` of it.
 fn covered_by(
@@ -600,20 +608,14 @@ fn covered_by(
         .collect()
 }
 
-/// The network's points (those not `covered`, when given), each taking its attributes from
-/// its nearest measured point.
-fn network_points(
-    predicted: &PointCloud,
-    measured_index: &KnnIndex,
-    covered: Option<&[bool]>,
-) -> Vec<Added> {
+/// The network's points, each taking its attributes from its nearest measured point.
+fn network_points(predicted: &PointCloud, measured_index: &KnnIndex) -> Vec<Added> {
     let sources = measured_index.nearest(&predicted.positions);
     predicted
         .positions
         .iter()
         .zip(sources)
         .enumerate()
-        .filter(|(i, _)| !covered.is_some_and(|c| c[*i]))
         .map(|(i, (&position, (source, _)))| Added {
             position,
             color: predicted.colors.as_ref().map(|c| c[i]),
@@ -961,6 +963,33 @@ mod tests {
         );
         assert_eq!(kept(None, 0.0), everything_but(&[[0.0, 0.26, 0.0]]));
         assert_eq!(kept(None, f64::INFINITY), predicted.positions);
+    }
+
+    /// Thinning keeps one of the network's added points per cube and adds none of its own. The
+    /// untrained model's every pixel is made a point, so that it adds some whatever its weights.
+    #[test]
+    fn thinning_keeps_one_added_point_per_cube() {
+        let inpainter = inpainter_for(ModelConfig {
+            occupancy: Some(1e-6),
+            ..Preset::Tiny.config()
+        });
+        let input = partial();
+        let added = |thin| {
+            let options = Options {
+                thin,
+                ..options(Method::Network)
+            };
+            let run = complete(&input, Some(&inpainter), &options).unwrap();
+            run.normalized[run.input_points..].to_vec()
+        };
+        let all = added(0.0);
+        let thinned = added(0.1);
+        assert!(!thinned.is_empty() && thinned.len() < all.len());
+        let mut cubes = std::collections::HashSet::new();
+        for p in &thinned {
+            assert!(all.contains(p));
+            assert!(cubes.insert(p.map(|c| (c / 0.1).floor() as i64)));
+        }
     }
 
     #[test]

@@ -141,6 +141,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         keep_input: !args.no_keep_input,
         merge_distance: args.merge_distance,
         box_margin: args.box_margin,
+        thin: args.thin,
         symmetry: !args.no_symmetry,
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),

@@ -385,14 +385,13 @@ pub fn complete(
         views = network.views;
         let start = Instant::now();
         if options.keep_input {
-            let covered = covered_by(
+            let gaps = uncovered(
                 &measured,
                 &added,
                 &network.predicted,
                 options.merge_distance,
             );
-            let uncovered: Vec<bool> = covered.iter().map(|c| !c).collect();
-            let fill = thinned(&network.predicted.filter(&uncovered), options.thin);
+            let fill = thinned(&gaps, options.thin);
             added.extend(network_points(&fill, &measured_index));
         } else {
             keep_input = false;
@@ -591,21 +590,21 @@ fn thinned(points: &PointCloud, side: f64) -> PointCloud {
     points.select(&thin::one_per_cube(&points.positions, side))
 }
 
-/// Per network point, whether a measured point or an added mirror image lies within
-/// `tolerance` of it.
-fn covered_by(
+/// The network's points with no measured point or added mirror image within `tolerance`.
+fn uncovered(
     measured: &[[f64; 3]],
     added: &[Added],
     predicted: &PointCloud,
     tolerance: f64,
-) -> Vec<bool> {
+) -> PointCloud {
     let mut covered = measured.to_vec();
     covered.extend(added.iter().map(|a| a.position));
-    KnnIndex::new(&covered)
+    let keep: Vec<bool> = KnnIndex::new(&covered)
         .nearest(&predicted.positions)
         .into_iter()
-        .map(|(_, d)| d <= tolerance)
-        .collect()
+        .map(|(_, d)| d > tolerance)
+        .collect();
+    predicted.filter(&keep)
 }
 
 /// The network's points, each taking its attributes from its nearest measured point.

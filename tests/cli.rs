@@ -265,20 +265,23 @@ fn filter_removes_far_outliers_and_keeps_attributes() {
 #[test]
 fn nan_points_are_dropped_with_a_warning() {
     let dir = TempDir::new().unwrap();
-    let input = write_bytes(
-        &dir,
-        "nan.xyz",
-        b"0 0 0\nnan 1 1\n1 1 1\ninf 0 0\n0.5 0.2 0.1\n",
+    let body = "0 0 0\nnan 1 1\n1 1 1\ninf 0 0\n0.5 0.2 0.1\n";
+    let ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n{body}"
     );
-    let out = dir.path().join("out.xyz");
-    mvpcc()
-        .args(["filter", s(&input), s(&out), "--sor-k", "0"])
-        .assert()
-        .success()
-        .stderr(predicate::str::contains(
-            "dropped 2 points with NaN or infinite coordinates",
-        ));
-    assert_eq!(read_cloud(&out, None).unwrap().cloud.len(), 3);
+    for (name, bytes) in [("nan.xyz", body.to_string()), ("nan.ply", ply)] {
+        let input = write_bytes(&dir, name, bytes.as_bytes());
+        let out = dir.path().join(format!("out-{name}"));
+        mvpcc()
+            .args(["filter", s(&input), s(&out), "--sor-k", "0"])
+            .assert()
+            .success()
+            .stderr(predicate::str::contains(
+                "dropped 2 points with NaN or infinite coordinates",
+            ));
+        assert_eq!(read_cloud(&out, None).unwrap().cloud.len(), 3, "{name}");
+    }
 }
 
 #[test]

@@ -3,8 +3,11 @@
 use super::{check_points, fits_f32, Encoding, Problem};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
-use std::io::{BufReader, Write};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding as PlyEncoding, Property, PropertyAccess, PropertyAccessResult,
+    PropertyType, ScalarType,
+};
+use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 
 #[derive(Clone, Copy, PartialEq)]
@@ -145,6 +148,74 @@ fn one_line(e: &ply_rs_bw::parser::ParseError) -> Problem {
     }
 }
 
+/// One value of an ASCII body. Rust's float syntax takes `nan`, `inf`, `.5` and `1.`, which
+/// scanners and PCL write (`nan` for a missing return) and ply-rs's digits-only grammar refuses.
+fn ascii_scalar(token: &str, t: &ScalarType) -> Option<Property> {
+    Some(match t {
+        ScalarType::Char => Property::Char(token.parse().ok()?),
+        ScalarType::UChar => Property::UChar(token.parse().ok()?),
+        ScalarType::Short => Property::Short(token.parse().ok()?),
+        ScalarType::UShort => Property::UShort(token.parse().ok()?),
+        ScalarType::Int => Property::Int(token.parse().ok()?),
+        ScalarType::UInt => Property::UInt(token.parse().ok()?),
+        ScalarType::Float => Property::Float(token.parse().ok()?),
+        ScalarType::Double => Property::Double(token.parse().ok()?),
+    })
+}
+
+/// The `def.count` lines of an ASCII element, one element per line, the first of them line
+/// `*line` of the file (advanced past them); list properties are read past (no caller keeps
+/// them).
+fn read_ascii<E: PropertyAccess, R: BufRead>(
+    reader: &mut Reader<R>,
+    def: &ElementDef,
+    line: &mut usize,
+) -> Result<Vec<E>, Problem> {
+    let mut out = Vec::with_capacity(def.count.min(1 << 20));
+    let mut text = String::new();
+    for i in 0..def.count {
+        text.clear();
+        if reader.get_mut().read_line(&mut text)? == 0 {
+            return Err(Problem::Truncated {
+                declared: def.count,
+                found: i,
+            });
+        }
+        let bad = || {
+            Problem::Malformed(format!(
+                "line {}: values {:?} do not match the header's properties",
+                *line,
+                text.trim()
+            ))
+        };
+        let mut tokens = text.split_whitespace();
+        let mut element = E::new();
+        for property in def.properties.values() {
+            match &property.data_type {
+                PropertyType::Scalar(t) => {
+                    let value = tokens
+                        .next()
+                        .and_then(|s| ascii_scalar(s, t))
+                        .ok_or_else(bad)?;
+                    element.set_property(&property.name, value);
+                }
+                PropertyType::List(..) => {
+                    let n: usize = tokens.next().and_then(|s| s.parse().ok()).ok_or_else(bad)?;
+                    if tokens.by_ref().take(n).count() < n {
+                        return Err(bad());
+                    }
+                }
+            }
+        }
+        if tokens.next().is_some() {
+            return Err(bad());
+        }
+        out.push(element);
+        *line += 1;
+    }
+    Ok(out)
+}
+
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     let file = std::fs::File::open(path)?;
     let mut reader = Reader::new(BufReader::with_capacity(1 << 20, file));
@@ -177,16 +248,24 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         })
         .collect();
 
+    let ascii = header.encoding == PlyEncoding::Ascii;
+    // After the header, ply-rs's tracker already names the next line (the first of the body).
+    let mut line = reader.line();
     let mut vertices = Vec::new();
     for (name, def) in &header.elements {
-        if name == "vertex" {
-            vertices = vertex_parser
-                .read_payload_for_element(&mut reader, def, &header)
-                .map_err(|e| one_line(&e))?;
-        } else {
-            Parser::<Skipped>::new()
-                .read_payload_for_element(&mut reader, def, &header)
-                .map_err(|e| one_line(&e))?;
+        match (name == "vertex", ascii) {
+            (true, true) => vertices = read_ascii(&mut reader, def, &mut line)?,
+            (true, false) => {
+                vertices = vertex_parser
+                    .read_payload_for_element(&mut reader, def, &header)
+                    .map_err(|e| one_line(&e))?
+            }
+            (false, true) => drop(read_ascii::<Skipped, _>(&mut reader, def, &mut line)?),
+            (false, false) => drop(
+                Parser::<Skipped>::new()
+                    .read_payload_for_element(&mut reader, def, &header)
+                    .map_err(|e| one_line(&e))?,
+            ),
         }
     }
 
@@ -327,6 +406,46 @@ mod tests {
         assert_eq!(c.attributes.len(), 1);
         assert_eq!(c.attributes[0].name, "nx");
         assert_eq!(c.attributes[0].values, vec![0.5, -0.5, 1.0]);
+    }
+
+    #[test]
+    fn ascii_takes_the_float_spellings_scanners_write() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n\
+            property float y\nproperty double z\nend_header\n\
+            nan 1 1\n.5 2. -inf\n1e-3 NaN 4\r\n  7\t8   9  \n";
+        let c = read_str(text.as_bytes()).unwrap();
+        let p = &c.positions;
+        assert!(p[0][0].is_nan() && p[2][1].is_nan());
+        assert_eq!(p[1], [0.5, 2.0, f64::NEG_INFINITY]);
+        assert_eq!([p[2][0] as f32, p[2][2] as f32], [1e-3, 4.0]);
+        assert_eq!(p[3], [7.0, 8.0, 9.0]);
+    }
+
+    #[test]
+    fn ascii_errors_name_the_line_that_is_wrong() {
+        let header = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int idx\n\
+            element vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+            property uchar red\nend_header\n3 0 1 2\n";
+        for (body, bad) in [
+            ("1 2 3 4\n1 2 3 4 5\n", "line 13: values \"1 2 3 4 5\""),
+            ("1 2 3 4\n1 2 3\n", "line 13: values \"1 2 3\""),
+            ("1 2 3 256\n1 2 3 4\n", "line 12: values \"1 2 3 256\""),
+        ] {
+            let e = read_str(format!("{header}{body}").as_bytes())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(bad), "{e}");
+        }
+        let short = read_str(format!("{header}1 2 3 4\n").as_bytes()).unwrap_err();
+        assert!(matches!(
+            short,
+            Problem::Truncated {
+                declared: 2,
+                found: 1
+            }
+        ));
+        let list_short = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int idx\nend_header\n3 0 1\n";
+        assert!(read_str(list_short.as_bytes()).is_err());
     }
 
     #[test]

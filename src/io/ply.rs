@@ -182,10 +182,11 @@ fn read_ascii<E: PropertyAccess, R: BufRead>(
             });
         }
         let bad = || {
+            // A hostile file's "line" may be megabytes long; the message stays one short line.
+            let shown: String = text.trim().chars().take(80).collect();
             Problem::Malformed(format!(
-                "line {}: values {:?} do not match the header's properties",
-                *line,
-                text.trim()
+                "line {}: values {shown:?} do not match the header's properties",
+                *line
             ))
         };
         let mut tokens = text.split_whitespace();
@@ -446,6 +447,12 @@ mod tests {
         ));
         let list_short = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int idx\nend_header\n3 0 1\n";
         assert!(read_str(list_short.as_bytes()).is_err());
+        let long = format!("{header}1 2 3 4\n{}\n", "9 ".repeat(100_000));
+        let e = read_str(long.as_bytes()).unwrap_err().to_string();
+        assert!(
+            e.starts_with("line 13: values \"9 9 ") && e.len() < 200,
+            "{e}"
+        );
     }
 
     #[test]

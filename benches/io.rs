@@ -13,10 +13,11 @@ fn io(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(8));
     for (name, encoding) in [
         ("ply", Encoding::Binary),
+        ("ply", Encoding::Ascii),
         ("pcd", Encoding::Binary),
         ("xyz", Encoding::Ascii),
     ] {
-        let path = dir.path().join(format!("car.{name}"));
+        let path = dir.path().join(format!("car-{encoding:?}.{name}"));
         write_cloud(&path, &cloud, None, encoding).unwrap();
         group.bench_function(format!("read 1M-point {name} ({encoding:?})"), |b| {
             b.iter(|| read_cloud(&path, None).unwrap())

@@ -1,4 +1,5 @@
-//! PLY (ascii, binary little and big endian) through ply-rs-bw; bodies are written directly.
+//! PLY: headers and binary bodies through ply-rs-bw; ASCII bodies, which its digits-only
+//! grammar would refuse where they hold `nan` or `.5`, read here. Files are written directly.
 
 use super::{check_points, fits_f32, Encoding, Problem};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
@@ -137,9 +138,6 @@ fn one_line(e: &ply_rs_bw::parser::ParseError) -> Problem {
         };
     }
     match quoted_line(&text) {
-        Some(bad) if text.contains("element line") => Problem::Malformed(format!(
-            "{line}values {bad:?} do not match the header's properties"
-        )),
         Some(bad) if bad.starts_with("format") => Problem::Malformed(format!(
             "{line}unknown format line {bad:?} (expected ascii, binary_little_endian or binary_big_endian)"
         )),

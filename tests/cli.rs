@@ -228,6 +228,17 @@ fn project_then_reproject_returns_to_the_input_frame() {
     assert!(m.fscores[0].precision > 0.999, "{m:?}");
     assert!(m.cd_l1 < 0.05, "{m:?}");
     assert!(back.colors.is_some());
+
+    // A NaN tolerance turned de-duplication off without a word.
+    let refused = dir.path().join("refused.ply");
+    mvpcc()
+        .args(["reproject", s(&views), s(&refused), "--dedup", "nan"])
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains(
+            "nan is not a distance of 0 or more",
+        ));
+    assert!(!refused.exists());
 }
 
 #[test]

@@ -299,6 +299,22 @@ fn the_built_in_model_completes_out_of_the_box() {
             "1.5 is not a probability between 0 and 1",
         ));
     assert!(!refused.exists());
+    // A NaN or negative σ made the outlier filter remove every point or most of them.
+    for sigma in ["nan", "-1"] {
+        mvpcc()
+            .args([
+                "complete",
+                s(&input),
+                s(&refused),
+                &format!("--sor-std={sigma}"),
+            ])
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(format!(
+                "{sigma} is not a number of 0 or more"
+            )));
+        assert!(!refused.exists());
+    }
 
     // Every completed point lies within the box's side of a measured or mirrored one, so a
     // merge distance that wide leaves the mirror's output.

@@ -290,3 +290,95 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
     );
     assert!(!out.exists());
 }
+
+/// Sizes and batches that would take hundreds of gigabytes: each aborted the process on an
+/// allocation (and a batch of 0 crashed `train-orient`) before these were refused.
+#[test]
+fn sizes_and_batches_beyond_the_limits() {
+    let dir = TempDir::new().unwrap();
+    let d = dir.path();
+    let input = write(d, "cloud.xyz", b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n");
+    let out = d.join("out");
+    let data = d.join("data");
+    let cases: [(&[&str], &str, &str); 7] = [
+        (
+            &["project", s(&input), s(&out), "--size", "100000"],
+            "image size 100000",
+            "above the largest this build renders (4096)",
+        ),
+        (
+            &[
+                "prepare",
+                "--synth",
+                "1",
+                "--gt-size",
+                "100000",
+                "--out",
+                s(&out),
+            ],
+            "--gt-size",
+            "at most 4096 pixels",
+        ),
+        (
+            &["profile", "--config", "tiny", "--batch", "100000"],
+            "--batch 100000",
+            "above the largest this build accepts (1024)",
+        ),
+        (
+            &[
+                "train",
+                "--data",
+                s(&data),
+                "--out",
+                s(&out),
+                "--batch",
+                "100000",
+            ],
+            "batch 100000",
+            "above the largest this build accepts (1024)",
+        ),
+        (
+            &[
+                "train-orient",
+                "--data",
+                s(&data),
+                "--out",
+                s(&out),
+                "--batch",
+                "0",
+            ],
+            "batch 0",
+            "1 to 1024 expected",
+        ),
+        (
+            &[
+                "train-orient",
+                "--data",
+                s(&data),
+                "--out",
+                s(&out),
+                "--batch",
+                "100000000",
+            ],
+            "batch 100000000",
+            "1 to 1024 expected",
+        ),
+        (
+            &[
+                "train-orient",
+                "--data",
+                s(&data),
+                "--out",
+                s(&out),
+                "--points",
+                "0",
+            ],
+            "--points",
+            "1 to 65536 expected",
+        ),
+    ];
+    for (args, names, problem) in cases {
+        refused(args, names, problem);
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
+}

@@ -91,7 +91,7 @@ pub struct SorOptions {
     #[arg(long, default_value_t = SorParams::DEFAULT.k)]
     pub sor_k: usize,
     /// Points whose mean neighbour distance exceeds mean + this × std are removed.
-    #[arg(long, default_value_t = SorParams::DEFAULT.std_mul)]
+    #[arg(long, default_value_t = SorParams::DEFAULT.std_mul, value_parser = non_negative)]
     pub sor_std: f64,
 }
 
@@ -407,7 +407,7 @@ pub struct ReprojectArgs {
     #[arg(long, default_value_t = ReprojectOptions::default().smooth)]
     pub smooth: usize,
     /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
-    #[arg(long, default_value_t = ReprojectOptions::default().dedup_tolerance)]
+    #[arg(long, default_value_t = ReprojectOptions::default().dedup_tolerance, value_parser = distance)]
     pub dedup: f64,
     /// Write normalized coordinates even when the directory has a frame.json.
     #[arg(long)]
@@ -800,6 +800,13 @@ fn positive_length(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(w) if w.is_finite() && w > 0.0 => Ok(w),
         _ => Err(format!("{text} is not a positive length")),
+    }
+}
+
+fn non_negative(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x >= 0.0 => Ok(x),
+        _ => Err(format!("{text} is not a number of 0 or more")),
     }
 }
 

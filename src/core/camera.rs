@@ -12,6 +12,9 @@ pub const DEFAULT_VIEWS: [usize; 4] = [5, 6, 7, 8];
 pub const REFERENCE_SIZE: usize = 256;
 /// Focal length in pixels at [`REFERENCE_SIZE`].
 pub const REFERENCE_FOCAL: f64 = 480.0;
+/// The largest image side a camera renders: 16× the paper's 256². Four views of it already
+/// take gigabytes, and a side of 100,000 asked a projection for 960 GB and aborted.
+pub const MAX_IMAGE_SIZE: usize = 4096;
 
 #[derive(Debug, Error, PartialEq)]
 pub enum CameraError {
@@ -25,6 +28,8 @@ pub enum CameraError {
     NotAnIndex(String),
     #[error("image size must be at least 8 pixels, got {0}")]
     TooSmall(usize),
+    #[error("image size {0} is above the largest this build renders ({MAX_IMAGE_SIZE})")]
+    TooLarge(usize),
 }
 
 /// Camera centres in units of `a = 1.2`, ordered as the original `cam_RT_NNN.txt` files.
@@ -81,6 +86,9 @@ impl Camera {
         }
         if size < 8 {
             return Err(CameraError::TooSmall(size));
+        }
+        if size > MAX_IMAGE_SIZE {
+            return Err(CameraError::TooLarge(size));
         }
         let center = Vector3::from(unit_center(index)) * 1.2;
         let forward = -center.normalize();
@@ -336,5 +344,10 @@ mod tests {
             Err(CameraError::NotAnIndex("x".into()))
         );
         assert_eq!(Camera::rig(5, 4), Err(CameraError::TooSmall(4)));
+        assert!(Camera::rig(5, MAX_IMAGE_SIZE).is_ok());
+        assert_eq!(
+            Camera::rig(5, MAX_IMAGE_SIZE + 1),
+            Err(CameraError::TooLarge(MAX_IMAGE_SIZE + 1))
+        );
     }
 }

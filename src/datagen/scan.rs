@@ -2,7 +2,7 @@
 //! merged on a voxel grid), and partial scans that look like mobile laser scans — the paper's
 //! way (a few cameras at or above the object) and a simulated profile scanner driving past.
 
-use crate::core::camera::{Camera, RIG_SIZE};
+use crate::core::camera::{Camera, CameraError, RIG_SIZE};
 use crate::core::rng::Lcg;
 use crate::datagen::mesh::{bounds_of, Mesh};
 use crate::datagen::raster::{rasterize, Surface};
@@ -13,20 +13,21 @@ use serde::{Deserialize, Serialize};
 pub const PARTIAL_CAMERAS: [usize; 12] = [5, 6, 7, 8, 10, 12, 14, 16, 17, 18, 19, 20];
 
 /// Surface points seen by all 20 rig cameras at `size`², merged and thinned to one point per
-/// `voxel`-sized cube. Inner structure no camera sees is never sampled.
-pub fn ground_truth(mesh: &Mesh, size: usize, voxel: f32) -> Surface {
-    let parts: Vec<Surface> = (1..=RIG_SIZE)
-        .into_par_iter()
-        .map(|i| {
-            let camera = Camera::rig(i, size).expect("rig index and size are valid");
-            rasterize(mesh, &camera).surface(mesh)
-        })
+/// `voxel`-sized cube. Inner structure no camera sees is never sampled. Fails on a `size` the
+/// cameras do not render.
+pub fn ground_truth(mesh: &Mesh, size: usize, voxel: f32) -> Result<Surface, CameraError> {
+    let cameras = (1..=RIG_SIZE)
+        .map(|i| Camera::rig(i, size))
+        .collect::<Result<Vec<_>, _>>()?;
+    let parts: Vec<Surface> = cameras
+        .par_iter()
+        .map(|camera| rasterize(mesh, camera).surface(mesh))
         .collect();
     let mut all = Surface::default();
     for p in parts {
         all.extend(p);
     }
-    voxel_thin(&all, voxel)
+    Ok(voxel_thin(&all, voxel))
 }
 
 /// Keeps the first point (in input order) of every occupied voxel, in input order.
@@ -483,7 +484,7 @@ mod tests {
     fn ground_truth_of_a_sphere_lies_on_it_and_covers_it() {
         let n = 64;
         let m = sphere(0.4, n);
-        let gt = ground_truth(&m, 128, 0.01);
+        let gt = ground_truth(&m, 128, 0.01).unwrap();
         // Facets span π/n in latitude and longitude: a facet's middle dips at most
         // r(1 − cos²(π/2n)) inside the sphere.
         let half = (std::f32::consts::PI / (2 * n) as f32).cos();
@@ -552,7 +553,7 @@ mod tests {
     #[test]
     fn camera_partials_are_subsets_of_the_ground_truth() {
         let m = normalized_car(3);
-        let gt = ground_truth(&m, 512, 1.0 / 256.0);
+        let gt = ground_truth(&m, 512, 1.0 / 256.0).unwrap();
         let spec = PartialSpec::Cameras {
             cameras: vec![6, 19],
             size: 128,
@@ -571,7 +572,7 @@ mod tests {
     #[test]
     fn scanner_partials_see_one_side_and_match_the_ground_truth_within_noise() {
         let m = normalized_car(4);
-        let gt = ground_truth(&m, 512, 1.0 / 256.0);
+        let gt = ground_truth(&m, 512, 1.0 / 256.0).unwrap();
         let noise = 0.002;
         let spec = PartialSpec::Scanner {
             side: 1.0,

@@ -168,6 +168,11 @@ const LIMITS: [(&str, usize); 5] = [
     ("views", crate::core::camera::RIG_SIZE),
 ];
 
+/// The largest micro-batch `train` and `profile` accept. The relay trains with 4; a batch of
+/// 100,000 asked the allocator for 183 GB and aborted the process, so a mistyped batch is
+/// refused with a message instead. Below it a batch can still outgrow the machine's memory.
+pub const MAX_BATCH: usize = 1024;
+
 impl ModelConfig {
     /// Sizes the layers cannot work with: the two stride-2 stages and the discriminator's
     /// three need `S` divisible by 4 and its 4×4 stride-1 tail at least 32 pixels.

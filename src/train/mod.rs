@@ -220,6 +220,12 @@ impl TrainSettings {
     pub fn validate(&self) -> Result<(), SettingsError> {
         let problem = if self.batch == 0 || self.accumulate == 0 {
             "batch and accumulate must be at least 1"
+        } else if self.batch > crate::model::MAX_BATCH {
+            return Err(SettingsError(format!(
+                "batch {} is above the largest this build accepts ({})",
+                self.batch,
+                crate::model::MAX_BATCH
+            )));
         } else if !(0.0..1.0).contains(&self.val_fraction) {
             "the validation fraction must lie in [0, 1)"
         } else if self.stage_rates.is_empty()
@@ -235,7 +241,7 @@ impl TrainSettings {
         } else {
             return Ok(());
         };
-        Err(SettingsError(problem))
+        Err(SettingsError(problem.to_string()))
     }
 
     /// The most steps the stages can take together.
@@ -247,7 +253,7 @@ impl TrainSettings {
 /// What [`TrainSettings::validate`] refuses.
 #[derive(Debug, Error)]
 #[error("{0}")]
-pub struct SettingsError(&'static str);
+pub struct SettingsError(String);
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -678,8 +684,9 @@ mod tests {
     #[test]
     fn default_settings_are_valid_and_broken_ones_are_refused() {
         assert!(TrainSettings::default().validate().is_ok());
-        let broken: [fn(&mut TrainSettings); 6] = [
+        let broken: [fn(&mut TrainSettings); 7] = [
             |s| s.batch = 0,
+            |s| s.batch = crate::model::MAX_BATCH + 1,
             |s| s.accumulate = 0,
             |s| s.val_fraction = 1.0,
             |s| s.stage_rates = vec![1e-4, f64::NAN],

@@ -56,6 +56,30 @@ impl Default for OrientSettings {
     }
 }
 
+impl OrientSettings {
+    /// Refuses settings no run can train with: a batch of 0 crashed the process, one of 10⁸
+    /// aborted it on an allocation.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.batch == 0 || self.batch > crate::model::MAX_BATCH {
+            return Err(format!(
+                "batch {} (1 to {} expected)",
+                self.batch,
+                crate::model::MAX_BATCH
+            ));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return Err(format!(
+                "learning rate {} (a positive number expected)",
+                self.learning_rate
+            ));
+        }
+        if self.views.is_empty() {
+            return Err("no views".into());
+        }
+        Ok(())
+    }
+}
+
 /// Heading errors on the validation samples.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct OrientScores {

@@ -164,9 +164,9 @@ pub fn write_views(dir: &Path, images: &ViewImages) -> Result<(), ViewError> {
     Ok(())
 }
 
-/// The largest view side read: 16× the paper's 256², and a 16-bit RGB image of it decodes to
-/// 96 MiB, so a header claiming more is refused before anything is decoded.
-pub const MAX_VIEW_SIZE: u32 = 4096;
+/// The largest view side read, the largest the cameras render: a 16-bit RGB image of it decodes
+/// to 96 MiB, so a header claiming more is refused before anything is decoded.
+pub const MAX_VIEW_SIZE: u32 = crate::core::camera::MAX_IMAGE_SIZE as u32;
 
 fn open(path: &Path) -> Result<image::DynamicImage, ViewError> {
     let io = |source| ViewError::Io {

@@ -147,18 +147,18 @@ pub fn dedup_indices(points: &[[f64; 3]], tolerance: f64) -> Vec<usize> {
     kept
 }
 
-/// Component-wise median XYZ of the occupied pixels in the `k`×`k` window around `at`.
+/// Component-wise median XYZ of the occupied pixels in the `k`×`k` window around `at`. The
+/// window is cut to the image first: `--smooth 100000` visited 10¹⁰ positions per pixel.
 fn median_xyz(px: &[f32], occupied: &[bool], size: usize, at: usize, k: usize) -> [f64; 3] {
     let plane = size * size;
-    let half = (k / 2) as isize;
-    let (row, col) = ((at / size) as isize, (at % size) as isize);
+    let half = k / 2;
+    let (row, col) = (at / size, at % size);
+    let rows = row.saturating_sub(half)..=(row + half).min(size - 1);
+    let cols = col.saturating_sub(half)..=(col + half).min(size - 1);
     let mut window: [Vec<f32>; 3] = Default::default();
-    for r in (row - half)..=(row + half) {
-        for c in (col - half)..=(col + half) {
-            if r < 0 || c < 0 || r >= size as isize || c >= size as isize {
-                continue;
-            }
-            let i = r as usize * size + c as usize;
+    for r in rows {
+        for c in cols.clone() {
+            let i = r * size + c;
             if occupied[i] {
                 for (ch, values) in window.iter_mut().enumerate() {
                     values.push(px[ch * plane + i]);
@@ -276,6 +276,26 @@ mod tests {
     use super::*;
     use crate::views::projection::project;
     use nalgebra::Vector3;
+
+    #[test]
+    fn a_median_window_is_cut_to_the_image() {
+        let size = 4;
+        let plane = size * size;
+        // x = the pixel's index, y = −x, z = 2x; the first row empty.
+        let mut px = vec![0.0f32; 3 * plane];
+        for i in 0..plane {
+            px[i] = i as f32;
+            px[plane + i] = -(i as f32);
+            px[2 * plane + i] = 2.0 * i as f32;
+        }
+        let occupied: Vec<bool> = (0..plane).map(|i| i >= size).collect();
+        // Around pixel 5 (row 1, col 1) a 3×3 window holds rows 1–2 of cols 0–2: 4 5 6 8 9 10.
+        assert_eq!(median_xyz(&px, &occupied, size, 5, 3), [8.0, -6.0, 16.0]);
+        // A window beyond the image on every side holds the whole image, 4..=15.
+        let whole = median_xyz(&px, &occupied, size, 0, 2 * size + 1);
+        assert_eq!(whole, [10.0, -9.0, 20.0]);
+        assert_eq!(median_xyz(&px, &occupied, size, 0, usize::MAX), whole);
+    }
 
     #[test]
     fn erosion_removes_the_rim_and_isolated_pixels() {

@@ -1,7 +1,7 @@
 use super::{synth, Log};
 use crate::cli::args::PrepareArgs;
 use anyhow::{bail, Context};
-use mvpcc::core::camera::check_view_set;
+use mvpcc::core::camera::{check_view_set, MAX_IMAGE_SIZE};
 use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
     Source, ViewsFrame, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
@@ -131,6 +131,9 @@ fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
     }
     if args.size < 8 || args.gt_size < 8 {
         bail!("--size and --gt-size must be at least 8 pixels");
+    }
+    if args.size.max(args.gt_size) > MAX_IMAGE_SIZE {
+        bail!("--size and --gt-size must be at most {MAX_IMAGE_SIZE} pixels");
     }
     if args.min_points == 0 || args.min_points > args.max_points {
         bail!(

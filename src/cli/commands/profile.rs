@@ -9,7 +9,7 @@ use anyhow::Context;
 use burn::tensor::{Device, Distribution, Tensor};
 use mvpcc::model::gan::{Batch, Gan, GanOptimConfig, StepClock, StepPhase};
 use mvpcc::model::loss::LossWeights;
-use mvpcc::model::{LayerKind, ModelConfig, Probe};
+use mvpcc::model::{LayerKind, ModelConfig, Probe, MAX_BATCH};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -44,6 +44,11 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
     config.validate().context("model config")?;
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
+    anyhow::ensure!(
+        args.batch <= MAX_BATCH,
+        "--batch {} is above the largest this build accepts ({MAX_BATCH})",
+        args.batch
+    );
     let opened = super::open_device(args.device, log)?;
     args.layers.set();
     log.info(format!(

@@ -13,8 +13,6 @@ use std::path::{Path, PathBuf};
 pub const WEIGHTS_FILE: &str = "orienter.safetensors";
 
 pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
-    let data = OrientData::scan(&args.data)?;
-    let out = output_dir(&args)?;
     let config = OrienterConfig::new().with_points(args.points);
     let settings = OrientSettings {
         batch: args.batch,
@@ -25,6 +23,14 @@ pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
         seed: args.seed,
         ..OrientSettings::default()
     };
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--points: {e}"))?;
+    settings
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid settings: {e}"))?;
+    let data = OrientData::scan(&args.data)?;
+    let out = output_dir(&args)?;
     write_file(
         &out.join("config.json"),
         serde_json::to_string_pretty(&config)?.as_bytes(),

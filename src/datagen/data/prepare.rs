@@ -4,7 +4,7 @@ use super::{
     coarse, split_of, CloudPolicy, Layout, ModelEntry, PrepareParams, SampleEntry, Source,
     ViewsFrame, DONE_FILE, GT_COARSE, GT_FINE, TEST,
 };
-use crate::core::camera::Camera;
+use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::PointCloud;
 use crate::core::rng::{derive_seed, Lcg};
 use crate::datagen::mesh::{read_mesh, Mesh, MeshError, MeshStats, ReadOptions, SignedAxis};
@@ -97,12 +97,13 @@ pub fn prepare_model(
     let path = &source.path;
     let (mesh, stats, scale) = normalized_mesh(path, params)?;
     let seed = derive_seed(params.seed, &format!("{}/{}", source.category, source.name));
-    let cameras = Camera::set(&params.views, params.size).map_err(|e| PrepareError::Normalize {
+    let camera_error = |e: CameraError| PrepareError::Normalize {
         path: path.clone(),
         problem: e.to_string(),
-    })?;
+    };
+    let cameras = Camera::set(&params.views, params.size).map_err(camera_error)?;
 
-    let gt = ground_truth(&mesh, params.gt_size, params.gt_voxel);
+    let gt = ground_truth(&mesh, params.gt_size, params.gt_voxel).map_err(camera_error)?;
     let gt_dir = layout.gt_views(split, &source.category, &source.name);
     create_dir(&gt_dir)?;
     write_views(&gt_dir, &render_views(&mesh, &cameras))?;

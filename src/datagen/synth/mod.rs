@@ -199,7 +199,7 @@ mod tests {
             let mut m = synthesize(i, 5, &[category]).mesh;
             m.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
                 .unwrap();
-            let gt = ground_truth(&m, 256, 1.0 / 256.0);
+            let gt = ground_truth(&m, 256, 1.0 / 256.0).unwrap();
             let cams = Camera::set(&[5, 6, 7, 8], 96).unwrap();
             let splat = crate::views::projection::project(&gt.points, None, &cams);
             let dense = crate::datagen::raster::render_views(&m, &cams);

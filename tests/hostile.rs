@@ -300,7 +300,7 @@ fn sizes_and_batches_beyond_the_limits() {
     let input = write(d, "cloud.xyz", b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n");
     let out = d.join("out");
     let data = d.join("data");
-    let cases: [(&[&str], &str, &str); 7] = [
+    let cases: [(&[&str], &str, &str); 8] = [
         (
             &["project", s(&input), s(&out), "--size", "100000"],
             "image size 100000",
@@ -318,6 +318,19 @@ fn sizes_and_batches_beyond_the_limits() {
             ],
             "--gt-size",
             "at most 4096 pixels",
+        ),
+        (
+            &[
+                "prepare",
+                "--synth",
+                "1",
+                "--max-points",
+                "100000000000",
+                "--out",
+                s(&out),
+            ],
+            "--max-points 100000000000",
+            "above the largest partial this build scans (10000000)",
         ),
         (
             &["profile", "--config", "tiny", "--batch", "100000"],

@@ -116,6 +116,11 @@ pub enum PartialKinds {
     SingleCamera,
 }
 
+/// The most points a partial sample may be asked for: a hundred times the largest default
+/// draw. The scan's resolution grows with the points asked, and `--max-points 1e11` made the
+/// scanner ask for 311 GB at once.
+pub const MAX_PARTIAL_POINTS: usize = 10_000_000;
+
 /// The ranges partial samples are drawn from.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PartialParams {

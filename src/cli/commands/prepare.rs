@@ -6,7 +6,7 @@ use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
     Source, ViewsFrame, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
 };
-use mvpcc::datagen::scan::PartialParams;
+use mvpcc::datagen::scan::{PartialParams, MAX_PARTIAL_POINTS};
 use mvpcc::io::atomic_write;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -139,6 +139,12 @@ fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
         bail!(
             "--min-points ({}) must be at least 1 and at most --max-points ({})",
             args.min_points,
+            args.max_points
+        );
+    }
+    if args.max_points > MAX_PARTIAL_POINTS {
+        bail!(
+            "--max-points {} is above the largest partial this build scans ({MAX_PARTIAL_POINTS})",
             args.max_points
         );
     }

@@ -620,3 +620,26 @@ fn vgg19_weights_feed_the_feature_losses_and_bad_ones_are_refused() {
                 .unwrap(),
         );
 }
+
+/// A queue of 10⁹ steps aborted the process on its allocation, and 10⁸ workers spent minutes
+/// spawning threads: both are refused before anything is read or written.
+#[test]
+fn loader_threads_and_queue_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    for (option, value, range) in [
+        ("--prefetch", "1000000000", "0..=256"),
+        ("--workers", "100000000", "1..=256"),
+        ("--workers", "0", "1..=256"),
+    ] {
+        mvpcc()
+            .args(["train", "--data", "no-such-data", "--out", s(&run)])
+            .args([option, value])
+            .assert()
+            .code(2)
+            .stderr(predicate::str::contains(format!(
+                "{value} is not in {range}"
+            )));
+        assert!(!run.exists());
+    }
+}

@@ -1,6 +1,7 @@
 //! Command-line definitions (clap derive). Each subcommand's arguments live beside the others
 //! here; what they do lives in [`crate::cli::commands`].
 
+use clap::builder::RangedU64ValueParser;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
@@ -741,11 +742,13 @@ pub struct TrainArgs {
         train().tv_from_stage,
     ))]
     pub tv_from_stage: Option<usize>,
-    /// Threads that load and render samples while the network trains.
-    #[arg(long, default_value_t = 1)]
+    /// Threads that load and render samples while the network trains (1–256).
+    // Bounded because 10⁸ spent minutes spawning threads without training.
+    #[arg(long, default_value_t = 1, value_parser = RangedU64ValueParser::<usize>::new().range(1..=256))]
     pub workers: usize,
-    /// Steps of data prepared ahead.
-    #[arg(long, default_value_t = 4)]
+    /// Steps of data prepared ahead (0–256).
+    // Bounded because the queue is allocated whole: 10⁹ aborted the process.
+    #[arg(long, default_value_t = 4, value_parser = RangedU64ValueParser::<usize>::new().range(0..=256))]
     pub prefetch: usize,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
     #[arg(long, default_value_t = DEFAULT_CACHE_MB)]

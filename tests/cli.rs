@@ -229,6 +229,21 @@ fn project_then_reproject_returns_to_the_input_frame() {
     assert!(m.cd_l1 < 0.05, "{m:?}");
     assert!(back.colors.is_some());
 
+    // Every file the views are read from is an input: a cloud written over a colour image or
+    // over frame.json would destroy the views.
+    for read in ["color_005.png", "locations_006.png", "frame.json"] {
+        let target = views.join(read);
+        let before = std::fs::read(&target).unwrap();
+        mvpcc()
+            .args(["reproject", s(&views), s(&target), "--out-format", "ply"])
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(
+                "output would overwrite the input file",
+            ));
+        assert_eq!(std::fs::read(&target).unwrap(), before, "{read}");
+    }
+
     // A NaN tolerance turned de-duplication off without a word.
     let refused = dir.path().join("refused.ply");
     mvpcc()

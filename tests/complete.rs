@@ -653,3 +653,40 @@ fn saved_views_are_the_datasets_format_and_eval_scores_them() {
         .success()
         .stderr(predicate::str::contains("no views to save"));
 }
+
+/// `--preview` once wrote its PNG over the input cloud it was given as a path; a preview or
+/// views path that cannot be written is now refused before anything is.
+#[test]
+fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let input = write(&dir, "scan.ply", &scan(3));
+    let before = std::fs::read(&input).unwrap();
+    let output = dir.path().join("done.ply");
+    let missing = dir.path().join("missing").join("p.png");
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["--preview", s(&input)],
+            "output would overwrite the input file",
+        ),
+        (
+            &["--preview", s(&output)],
+            "--preview names the output cloud",
+        ),
+        (&["--preview", s(&missing)], "does not exist"),
+        (
+            &["--save-views", s(&input)],
+            "--save-views needs a directory",
+        ),
+    ];
+    for (extra, problem) in cases {
+        mvpcc()
+            .args(["complete", s(&input), s(&output), "--model", s(&model)])
+            .args(extra)
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(problem));
+        assert!(!output.exists(), "{extra:?} wrote the output");
+        assert_eq!(std::fs::read(&input).unwrap(), before, "{extra:?}");
+    }
+}

@@ -228,23 +228,34 @@ pub fn write_cloud(
 /// directory does not exist.
 pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
     let err = |problem| CloudIoError::new(output, problem);
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
+    let parent = parent_dir(output);
     if !parent.is_dir() {
         return Err(err(Problem::NoOutputDirectory(parent)));
     }
-    let resolved = match (parent.canonicalize(), output.file_name()) {
-        (Ok(dir), Some(name)) => dir.join(name).canonicalize().unwrap_or(dir.join(name)),
-        _ => output.to_path_buf(),
-    };
-    for input in inputs {
-        if input.canonicalize().is_ok_and(|i| i == resolved) {
-            return Err(err(Problem::OverwritesInput));
-        }
+    if inputs.iter().any(|input| same_file(input, output)) {
+        return Err(err(Problem::OverwritesInput));
     }
     Ok(())
+}
+
+/// Whether two paths name one file, following symbolic links; neither file need exist yet.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    resolved(a) == resolved(b)
+}
+
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// `path` with its links followed: the file's own where it exists, else its directory's.
+fn resolved(path: &Path) -> PathBuf {
+    match (parent_dir(path).canonicalize(), path.file_name()) {
+        (Ok(dir), Some(name)) => dir.join(name).canonicalize().unwrap_or(dir.join(name)),
+        _ => path.to_path_buf(),
+    }
 }
 
 /// Writes through `body` into a temporary file beside `path`, then renames it over `path`, so a

@@ -13,7 +13,7 @@ use mvpcc::complete::{
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
-use mvpcc::io::{atomic_write, check_output, write_cloud, Format};
+use mvpcc::io::{atomic_write, check_output, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::views::write_views;
@@ -226,6 +226,15 @@ fn complete_file(
     log: Log,
 ) -> anyhow::Result<FileReport> {
     check_output(output, &[input])?;
+    if let Some(preview) = &args.preview {
+        check_output(preview, &[input])?;
+        if same_file(preview, output) {
+            bail!("{}: --preview names the output cloud", preview.display());
+        }
+    }
+    if let Some(dir) = views.as_ref().filter(|d| d.exists() && !d.is_dir()) {
+        bail!("{}: --save-views needs a directory", dir.display());
+    }
     let format = output_format(args, input, output)?;
     let start = Instant::now();
     let cloud = load(input, args.input_options.format, log)?;

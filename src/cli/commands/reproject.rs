@@ -4,7 +4,7 @@ use anyhow::bail;
 use mvpcc::complete::filter::inliers;
 use mvpcc::io::{check_output, write_cloud};
 use mvpcc::views::reprojection::{reproject, ReprojectOptions};
-use mvpcc::views::{find_views, locations_path, read_views, ViewsInfo};
+use mvpcc::views::{color_path, find_views, locations_path, read_views, ViewsInfo, INFO_FILE};
 
 pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = match &args.views {
@@ -13,7 +13,13 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
     };
     let inputs: Vec<_> = cameras
         .iter()
-        .map(|&c| locations_path(&args.viewdir, c))
+        .flat_map(|&c| {
+            [
+                locations_path(&args.viewdir, c),
+                color_path(&args.viewdir, c),
+            ]
+        })
+        .chain([args.viewdir.join(INFO_FILE)])
         .collect();
     check_output(
         &args.output,

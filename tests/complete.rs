@@ -690,3 +690,30 @@ fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
         assert_eq!(std::fs::read(&input).unwrap(), before, "{extra:?}");
     }
 }
+
+/// `--model` takes the folder `train --init` takes: a run's or one laid out as assets/.
+#[test]
+fn a_model_folder_laid_out_as_assets_is_read() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "scan.ply", &scan(3));
+    let assets = dir.path().join("assets");
+    std::fs::create_dir(&assets).unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    std::fs::copy(tiny_model(&dir), assets.join("model.safetensors")).unwrap();
+    let output = dir.path().join("done.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&output), "--model", s(&assets)])
+        .assert()
+        .success();
+    assert!(output.exists());
+    let refused = dir.path().join("refused.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&refused), "--model", s(&empty)])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "empty: holds neither generator.safetensors nor model.safetensors",
+        ));
+    assert!(!refused.exists());
+}

@@ -246,8 +246,8 @@ pub struct CompleteArgs {
     /// mirror image across the vehicle's long vertical plane).
     #[arg(long, value_enum, default_value_t = Method::Network)]
     pub method: Method,
-    /// Generator weights (a run's generator.safetensors, or its run directory) [default: the
-    /// built-in model].
+    /// Generator weights (a run's generator.safetensors, its run directory, or a folder holding
+    /// model.safetensors as assets/ does) [default: the built-in model].
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Probability above which a pixel of the network's output becomes a point; lower adds

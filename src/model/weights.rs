@@ -7,10 +7,26 @@ use burn::module::Module;
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::Device;
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// Bumped whenever a change to the networks' structure makes older files unreadable.
 pub const FORMAT_VERSION: u32 = 1;
+
+/// A run's generator file, in its folder and each checkpoint's.
+pub const GENERATOR_FILE: &str = "generator.safetensors";
+/// The built-in generator's file in assets/.
+pub const ASSETS_GENERATOR_FILE: &str = "model.safetensors";
+
+/// The generator's weights in `dir`: a run's [`GENERATOR_FILE`] or assets/'
+/// [`ASSETS_GENERATOR_FILE`], so that `--model` and `--init` take either folder.
+pub fn generator_in(dir: &Path) -> Result<PathBuf, String> {
+    [GENERATOR_FILE, ASSETS_GENERATOR_FILE]
+        .iter()
+        .map(|name| dir.join(name))
+        .find(|p| p.is_file())
+        .ok_or_else(|| format!("holds neither {GENERATOR_FILE} nor {ASSETS_GENERATOR_FILE}"))
+}
 
 const KEY_KIND: &str = "mvpcc.network";
 const KEY_VERSION: &str = "mvpcc.format_version";

@@ -26,7 +26,7 @@ const DISCRIMINATOR: &str = "discriminator.bpk";
 const GENERATOR_OPTIM: &str = "generator_optim.bpk";
 const DISCRIMINATOR_OPTIM: &str = "discriminator_optim.bpk";
 /// The generator alone as a self-describing weights file, what `complete --model` reads.
-pub const GENERATOR_WEIGHTS: &str = "generator.safetensors";
+pub const GENERATOR_WEIGHTS: &str = crate::model::weights::GENERATOR_FILE;
 /// The discriminator as a self-describing weights file, so that `train --init` can continue
 /// a run's adversarial game in a new run.
 pub const DISCRIMINATOR_WEIGHTS: &str = "discriminator.safetensors";

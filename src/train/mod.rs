@@ -19,7 +19,7 @@ use crate::model::loss::LossWeights;
 use crate::model::{weights, ModelConfig};
 use burn::module::Module;
 use burn::tensor::Device;
-use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS, GENERATOR_WEIGHTS};
+use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS};
 use dataset::{hold_back, scan_split, AugmentSettings, DataError, SampleRef};
 use serde::{Deserialize, Serialize};
 use session::Session;
@@ -86,25 +86,16 @@ pub struct InitWeights {
     pub discriminator: Option<PathBuf>,
 }
 
-/// The built-in generator's file name in assets/.
-const ASSETS_GENERATOR: &str = "model.safetensors";
-
 impl InitWeights {
-    /// The files `path` names: a generator's weights file, or a folder holding
-    /// generator.safetensors (a run) or model.safetensors (assets/), with the discriminator's
-    /// file beside it when there; `discriminator` overrides that one.
+    /// The files `path` names: a generator's weights file, or a folder holding one
+    /// ([`crate::model::weights::generator_in`]), with the discriminator's file beside it when there; `discriminator`
+    /// overrides that one.
     pub fn find(path: &Path, discriminator: Option<PathBuf>) -> Result<InitWeights, TrainError> {
         let generator = if path.is_dir() {
-            [GENERATOR_WEIGHTS, ASSETS_GENERATOR]
-                .iter()
-                .map(|name| path.join(name))
-                .find(|p| p.is_file())
-                .ok_or_else(|| TrainError::Run {
-                    path: path.to_path_buf(),
-                    problem: format!(
-                        "--init: holds neither {GENERATOR_WEIGHTS} nor {ASSETS_GENERATOR}"
-                    ),
-                })?
+            crate::model::weights::generator_in(path).map_err(|problem| TrainError::Run {
+                path: path.to_path_buf(),
+                problem: format!("--init: {problem}"),
+            })?
         } else {
             path.to_path_buf()
         };

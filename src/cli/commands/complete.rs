@@ -16,6 +16,7 @@ use mvpcc::io::batch::{self, read_list, walk};
 use mvpcc::io::{atomic_write, check_output, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
+use mvpcc::model::weights::generator_in;
 use mvpcc::views::write_views;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -55,13 +56,14 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
     }
 }
 
-/// The generator from `--model` (a weights file or a run directory) or the built-in one.
+/// The generator from `--model` (a weights file, a run directory or assets/) or the built-in
+/// one.
 fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Result<Inpainter> {
     let opened = super::open_device(device, log)?;
     let inpainter = match path {
         Some(path) => {
             let file = if path.is_dir() {
-                path.join("generator.safetensors")
+                generator_in(path).map_err(|problem| anyhow!("{}: {problem}", path.display()))?
             } else {
                 path.to_path_buf()
             };

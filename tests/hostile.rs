@@ -300,98 +300,46 @@ fn sizes_and_batches_beyond_the_limits() {
     let input = write(d, "cloud.xyz", b"0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 1\n");
     let out = d.join("out");
     let data = d.join("data");
-    let cases: [(&[&str], &str, &str); 8] = [
+    let (cloud, to, from) = (s(&input), s(&out), s(&data));
+    let project: &[&str] = &["project", cloud, to];
+    let prepare: &[&str] = &["prepare", "--synth", "1", "--out", to];
+    let profile: &[&str] = &["profile", "--config", "tiny"];
+    let train: &[&str] = &["train", "--data", from, "--out", to];
+    let orient: &[&str] = &["train-orient", "--data", from, "--out", to];
+    let over_1024 = "above the largest this build accepts (1024)";
+    let cases = [
         (
-            &["project", s(&input), s(&out), "--size", "100000"],
+            project,
+            ["--size", "100000"],
             "image size 100000",
             "above the largest this build renders (4096)",
         ),
         (
-            &[
-                "prepare",
-                "--synth",
-                "1",
-                "--gt-size",
-                "100000",
-                "--out",
-                s(&out),
-            ],
+            prepare,
+            ["--gt-size", "100000"],
             "--gt-size",
             "at most 4096 pixels",
         ),
         (
-            &[
-                "prepare",
-                "--synth",
-                "1",
-                "--max-points",
-                "100000000000",
-                "--out",
-                s(&out),
-            ],
+            prepare,
+            ["--max-points", "100000000000"],
             "--max-points 100000000000",
             "above the largest partial this build scans (10000000)",
         ),
+        (profile, ["--batch", "100000"], "--batch 100000", over_1024),
+        (train, ["--batch", "100000"], "batch 100000", over_1024),
+        (orient, ["--batch", "0"], "batch 0", "1 to 1024 expected"),
         (
-            &["profile", "--config", "tiny", "--batch", "100000"],
-            "--batch 100000",
-            "above the largest this build accepts (1024)",
-        ),
-        (
-            &[
-                "train",
-                "--data",
-                s(&data),
-                "--out",
-                s(&out),
-                "--batch",
-                "100000",
-            ],
-            "batch 100000",
-            "above the largest this build accepts (1024)",
-        ),
-        (
-            &[
-                "train-orient",
-                "--data",
-                s(&data),
-                "--out",
-                s(&out),
-                "--batch",
-                "0",
-            ],
-            "batch 0",
-            "1 to 1024 expected",
-        ),
-        (
-            &[
-                "train-orient",
-                "--data",
-                s(&data),
-                "--out",
-                s(&out),
-                "--batch",
-                "100000000",
-            ],
+            orient,
+            ["--batch", "100000000"],
             "batch 100000000",
             "1 to 1024 expected",
         ),
-        (
-            &[
-                "train-orient",
-                "--data",
-                s(&data),
-                "--out",
-                s(&out),
-                "--points",
-                "0",
-            ],
-            "--points",
-            "1 to 65536 expected",
-        ),
+        (orient, ["--points", "0"], "--points", "1 to 65536 expected"),
     ];
-    for (args, names, problem) in cases {
-        refused(args, names, problem);
+    for (command, option, names, problem) in cases {
+        let args: Vec<&str> = command.iter().chain(&option).copied().collect();
+        refused(&args, names, problem);
         assert!(!out.exists(), "{args:?} wrote {}", out.display());
     }
 }

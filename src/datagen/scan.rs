@@ -116,9 +116,9 @@ pub enum PartialKinds {
     SingleCamera,
 }
 
-/// The most points a partial sample may be asked for: a hundred times the largest default
-/// draw. The scan's resolution grows with the points asked, and `--max-points 1e11` made the
-/// scanner ask for 311 GB at once.
+/// The most points a partial sample is scanned for, about 75 times the largest default draw.
+/// The scan's resolution grows with the points asked, and `--max-points 1e11` made the scanner
+/// ask for 311 GB at once; [`partial`] holds its draw to this whatever the params say.
 pub const MAX_PARTIAL_POINTS: usize = 10_000_000;
 
 /// The ranges partial samples are drawn from.
@@ -150,10 +150,12 @@ const PROBE_SIZE: usize = 128;
 
 /// Draws a partial sample's settings from `rng` and scans it.
 pub fn partial(mesh: &Mesh, params: &PartialParams, rng: &mut Lcg) -> (PartialSpec, Surface) {
-    let target = rng.log_range(
-        params.min_points as f64,
-        params.max_points.max(params.min_points) as f64,
-    );
+    let target = rng
+        .log_range(
+            params.min_points as f64,
+            params.max_points.max(params.min_points) as f64,
+        )
+        .min(MAX_PARTIAL_POINTS as f64);
     let use_cameras = match params.kinds {
         PartialKinds::Cameras | PartialKinds::SingleCamera => true,
         PartialKinds::Scanner => false,

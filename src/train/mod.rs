@@ -88,11 +88,11 @@ pub struct InitWeights {
 
 impl InitWeights {
     /// The files `path` names: a generator's weights file, or a folder holding one
-    /// ([`crate::model::weights::generator_in`]), with the discriminator's file beside it when there; `discriminator`
-    /// overrides that one.
+    /// ([`weights::generator_in`]), with the discriminator's file beside it when there;
+    /// `discriminator` overrides that one.
     pub fn find(path: &Path, discriminator: Option<PathBuf>) -> Result<InitWeights, TrainError> {
         let generator = if path.is_dir() {
-            crate::model::weights::generator_in(path).map_err(|problem| TrainError::Run {
+            weights::generator_in(path).map_err(|problem| TrainError::Run {
                 path: path.to_path_buf(),
                 problem: format!("--init: {problem}"),
             })?

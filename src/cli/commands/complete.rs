@@ -380,17 +380,35 @@ fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::
     .with_context(|| format!("{}: cannot write the preview", path.display()))
 }
 
-/// `*` any run of characters, `?` one character.
+/// `*` any run of characters, `?` one character. Only the last `*` is ever backtracked to (a
+/// later star can take whatever an earlier one would have), so the work stays within
+/// pattern × name: trying every split at every star took exponential time, and
+/// `--include '*a*a*a*a*a*a*a*a*a*a*a*a*b'` over a name of sixty `a`s ran for minutes.
 fn matches(pattern: &[char], name: &[char]) -> bool {
-    match (pattern.first(), name.first()) {
-        (None, None) => true,
-        (Some('*'), _) => {
-            matches(&pattern[1..], name) || (!name.is_empty() && matches(pattern, &name[1..]))
+    let (mut p, mut n) = (0, 0);
+    // The last star seen and the name position its run currently ends at.
+    let mut star: Option<(usize, usize)> = None;
+    while n < name.len() {
+        match pattern.get(p) {
+            Some('*') => {
+                star = Some((p, n));
+                p += 1;
+            }
+            Some(&c) if c == '?' || c == name[n] => {
+                p += 1;
+                n += 1;
+            }
+            _ => match star {
+                Some((at, end)) => {
+                    star = Some((at, end + 1));
+                    p = at + 1;
+                    n = end + 1;
+                }
+                None => return false,
+            },
         }
-        (Some('?'), Some(_)) => matches(&pattern[1..], &name[1..]),
-        (Some(p), Some(n)) => p == n && matches(&pattern[1..], &name[1..]),
-        _ => false,
     }
+    pattern[p..].iter().all(|&c| c == '*')
 }
 
 /// What `complete --json` reports for a batch.
@@ -613,5 +631,21 @@ mod tests {
         assert!(m("a?c", "abc"));
         assert!(!m("a?c", "ac"));
         assert!(m("*.p*", "x.pcd"));
+        assert!(m("", ""));
+        assert!(m("*", ""));
+        assert!(m("**", "ab"));
+        assert!(!m("?", ""));
+        assert!(!m("", "a"));
+        assert!(m("a*b*c", "abbbc"));
+        assert!(!m("a*b*c", "acb"));
+        assert!(m("*ab", "aab"));
+        assert!(m("*a?", "xaab"));
+        assert!(!m("*a", "ab"));
+        // Many stars against a long name that almost matches: answered at once.
+        assert!(!m("*a*a*a*a*a*a*a*a*a*a*a*a*b", &"a".repeat(60)));
+        assert!(m(
+            "*a*a*a*a*a*a*a*a*a*a*a*a*b",
+            &format!("{}b", "a".repeat(60))
+        ));
     }
 }

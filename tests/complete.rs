@@ -717,3 +717,36 @@ fn a_model_folder_laid_out_as_assets_is_read() {
         ));
     assert!(!refused.exists());
 }
+
+/// An `--include` that matches nothing says so; one of many stars over a long name is answered
+/// at once (the recursive match it replaced ran for minutes on this one).
+#[test]
+fn an_include_pattern_that_matches_nothing_is_named() {
+    let dir = TempDir::new().unwrap();
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    write_cloud(
+        &inputs.join(format!("{}.ply", "a".repeat(60))),
+        &scan(3),
+        None,
+        Encoding::Binary,
+    )
+    .unwrap();
+    let outputs = dir.path().join("out");
+    let stars = "*a*a*a*a*a*a*a*a*a*a*a*a*b";
+    mvpcc()
+        .args([
+            "complete",
+            "--input-dir",
+            s(&inputs),
+            "--output-dir",
+            s(&outputs),
+        ])
+        .args(["--method", "mirror", "--include", stars])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(format!(
+            "no file matches --include '{stars}'"
+        )));
+    assert!(!outputs.exists());
+}

@@ -456,8 +456,12 @@ fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>>
                 }
                 None => Format::from_path(path).is_ok(),
             })?;
-            if files.is_empty() {
-                bail!("{}: no point cloud files", root.display());
+            match (&args.include, files.is_empty()) {
+                (Some(include), true) => {
+                    bail!("{}: no file matches --include '{include}'", root.display())
+                }
+                (None, true) => bail!("{}: no point cloud files", root.display()),
+                _ => {}
             }
             files
         }

@@ -719,7 +719,7 @@ fn a_model_folder_laid_out_as_assets_is_read() {
 }
 
 /// An `--include` that matches nothing says so; one of many stars over a long name is answered
-/// at once (the recursive match it replaced ran for minutes on this one).
+/// at once (the recursive match it replaced ran past 30 s on this one).
 #[test]
 fn an_include_pattern_that_matches_nothing_is_named() {
     let dir = TempDir::new().unwrap();

@@ -743,7 +743,7 @@ pub struct TrainArgs {
     ))]
     pub tv_from_stage: Option<usize>,
     /// Threads that load and render samples while the network trains (1–256).
-    // Bounded because 10⁸ spent minutes spawning threads without training.
+    // Bounded because 10⁸ spawned threads for over 100 s without a step.
     #[arg(long, default_value_t = 1, value_parser = RangedU64ValueParser::<usize>::new().range(1..=256))]
     pub workers: usize,
     /// Steps of data prepared ahead (0–256).

@@ -28,6 +28,21 @@ pub enum FrameError {
     Empty,
     #[error("all points are identical (zero extent), so the cloud cannot be normalized")]
     ZeroExtent,
+    /// Coordinates near ±1.8e308 span more than an f64 holds: the frame wrote a `null` extent
+    /// that `reproject` then could not use.
+    #[error("the coordinates are too large to normalize (their box overflows f64)")]
+    Overflow,
+}
+
+/// The extent and centre of a frame, refused where they cannot normalize anything.
+fn checked(extent: f64, center: [f64; 3]) -> Result<(), FrameError> {
+    if extent.is_nan() || extent <= 0.0 {
+        Err(FrameError::ZeroExtent)
+    } else if !extent.is_finite() || center.iter().any(|c| !c.is_finite()) {
+        Err(FrameError::Overflow)
+    } else {
+        Ok(())
+    }
 }
 
 /// `normalized = R · (p − center) / extent`, with `R` a rotation.
@@ -88,9 +103,7 @@ impl Frame {
         let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
         let size = bounds.extent();
         let extent = bounds.longest_side();
-        if extent.is_nan() || extent <= 0.0 {
-            return Err(FrameError::ZeroExtent);
-        }
+        checked(extent, bounds.center())?;
         let upright = upright(up);
         // Extents of the upright box along its x and z (a permutation only moves the sides).
         let upright_size = apply(&upright, size).map(f64::abs);
@@ -113,6 +126,7 @@ impl Frame {
         let rotation = mat_mul(&yaw_to_canonical(heading), &upright(up));
         // Turned about the axis-aligned centre, so georeferenced offsets cost no precision.
         let origin = bounds.center();
+        checked(bounds.longest_side(), origin)?;
         let turned = Aabb::of_iter(
             cloud
                 .positions
@@ -121,12 +135,11 @@ impl Frame {
         )
         .ok_or(FrameError::Empty)?;
         let extent = turned.longest_side();
-        if extent.is_nan() || extent <= 0.0 {
-            return Err(FrameError::ZeroExtent);
-        }
         let offset = apply_transposed(&rotation, turned.center());
+        let center = [0, 1, 2].map(|i| origin[i] + offset[i]);
+        checked(extent, center)?;
         Ok(Frame {
-            center: [0, 1, 2].map(|i| origin[i] + offset[i]),
+            center,
             extent,
             rotation,
         })
@@ -327,6 +340,18 @@ mod tests {
         assert_eq!(
             Frame::fit_heading(&same, UpAxis::Z, 10.0),
             Err(FrameError::ZeroExtent)
+        );
+        let wide = PointCloud::from_positions(vec![[1e308, 0.0, 0.0], [-1e308, 1.0, 0.0]]);
+        assert_eq!(Frame::fit(&wide, UpAxis::Y), Err(FrameError::Overflow));
+        assert_eq!(
+            Frame::fit_heading(&wide, UpAxis::Y, 0.0),
+            Err(FrameError::Overflow)
+        );
+        let far = PointCloud::from_positions(vec![[1.5e308, 0.0, 0.0], [1.6e308, 1.0, 0.0]]);
+        assert_eq!(Frame::fit(&far, UpAxis::Y), Err(FrameError::Overflow));
+        assert_eq!(
+            Frame::fit_heading(&far, UpAxis::Y, 0.0),
+            Err(FrameError::Overflow)
         );
     }
 }

@@ -1035,6 +1035,24 @@ fn prepare_reads_a_shapenet_layout_and_skips_bad_meshes_with_a_count() {
         "not a directory",
         Path::new("o"),
     );
+    // Refused before anything is written: a folder without meshes, and an output inside the
+    // meshes' folder (its clouds would be read as meshes by the next run).
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let nothing = dir.path().join("nothing");
+    fails(
+        &["prepare", "--meshes", s(&empty), "--out", s(&nothing)],
+        "empty",
+        "no meshes found",
+        &nothing,
+    );
+    let within = root.join("data");
+    fails(
+        &["prepare", "--meshes", s(&root), "--out", s(&within)],
+        "data",
+        "--out lies in the --meshes folder",
+        &within,
+    );
 }
 
 /// Our view PNGs have the reference dataset's pixel format, so the two are interchangeable.

@@ -32,6 +32,34 @@ struct Summary {
 }
 
 /// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
+/// Whether `path` (which need not exist yet) is `dir` or lies under it, links followed.
+fn inside(path: &Path, dir: &Path) -> bool {
+    let Ok(dir) = dir.canonicalize() else {
+        return false;
+    };
+    // The deepest part of `path` that exists, resolved, with the rest appended.
+    let mut existing = path.to_path_buf();
+    let mut rest = Vec::new();
+    while !existing.exists() {
+        match (existing.file_name(), existing.parent()) {
+            (Some(name), Some(parent)) => {
+                rest.push(name.to_os_string());
+                existing = if parent.as_os_str().is_empty() {
+                    PathBuf::from(".")
+                } else {
+                    parent.to_path_buf()
+                };
+            }
+            _ => return false,
+        }
+    }
+    let Ok(mut resolved) = existing.canonicalize() else {
+        return false;
+    };
+    resolved.extend(rest.iter().rev());
+    resolved.starts_with(dir)
+}
+
 fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {
     match (&args.meshes, args.synth) {
         (Some(dir), _) => {
@@ -228,8 +256,14 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
         bail!("{}: exists and is not a directory", out.display());
     }
     let meshes = meshes_dir(&args, log)?;
-    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    claim(out, &params)?;
+    if args.meshes.is_some() && inside(out, &meshes) {
+        bail!(
+            "{}: --out lies in the --meshes folder {}, whose next scan would read its clouds as meshes",
+            out.display(),
+            meshes.display()
+        );
+    }
+    // Found before anything is written, so a folder without meshes leaves no output behind.
     let (mut sources, mut skipped) = discover(&meshes)?;
     if sources.is_empty() {
         bail!(
@@ -237,6 +271,8 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
             meshes.display()
         );
     }
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    claim(out, &params)?;
     if let Some(shard) = args.shard {
         sources.retain(|s| shard.owns(&format!("{}/{}", s.category, s.name)));
         // The run without --shard that writes the manifest lists them.

@@ -18,6 +18,7 @@ use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
 use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
+use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
 use mvpcc::views::reprojection::ReprojectOptions;
@@ -743,12 +744,10 @@ pub struct TrainArgs {
     ))]
     pub tv_from_stage: Option<usize>,
     /// Threads that load and render samples while the network trains (1–256).
-    // Bounded because 10⁸ spawned threads for over 100 s without a step.
-    #[arg(long, default_value_t = 1, value_parser = RangedU64ValueParser::<usize>::new().range(1..=256))]
+    #[arg(long, default_value_t = 1, value_parser = RangedU64ValueParser::<usize>::new().range(1..=MAX_WORKERS as u64))]
     pub workers: usize,
     /// Steps of data prepared ahead (0–256).
-    // Bounded because the queue is allocated whole: 10⁹ aborted the process.
-    #[arg(long, default_value_t = 4, value_parser = RangedU64ValueParser::<usize>::new().range(0..=256))]
+    #[arg(long, default_value_t = 4, value_parser = RangedU64ValueParser::<usize>::new().range(0..=MAX_PREFETCH as u64))]
     pub prefetch: usize,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
     #[arg(long, default_value_t = DEFAULT_CACHE_MB)]

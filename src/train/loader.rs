@@ -49,6 +49,11 @@ pub struct StepData {
     pub micro: Vec<HostBatch>,
 }
 
+/// The most loader threads: 10⁸ spawned threads for over 100 s without a step.
+pub const MAX_WORKERS: usize = 256;
+/// The most steps prepared ahead: the queue is allocated whole, and 10⁹ aborted the process.
+pub const MAX_PREFETCH: usize = 256;
+
 #[derive(Debug, Clone, Copy)]
 pub struct LoaderPlan {
     pub seed: u64,
@@ -73,10 +78,10 @@ impl Loader {
         cache: Arc<Cache>,
         plan: LoaderPlan,
     ) -> Loader {
-        let (tx, rx) = sync_channel(plan.prefetch.max(1));
+        let (tx, rx) = sync_channel(plan.prefetch.clamp(1, MAX_PREFETCH));
         std::thread::spawn(move || {
             let pool = match rayon::ThreadPoolBuilder::new()
-                .num_threads(plan.workers.max(1))
+                .num_threads(plan.workers.clamp(1, MAX_WORKERS))
                 .thread_name(|i| format!("mvpcc-loader-{i}"))
                 .build()
             {

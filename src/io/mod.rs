@@ -250,10 +250,14 @@ fn parent_dir(path: &Path) -> PathBuf {
     }
 }
 
-/// `path` with its links followed: the file's own where it exists, else its directory's.
-fn resolved(path: &Path) -> PathBuf {
-    match (parent_dir(path).canonicalize(), path.file_name()) {
-        (Ok(dir), Some(name)) => dir.join(name).canonicalize().unwrap_or(dir.join(name)),
+/// `path` with its links followed: the deepest part of it that exists resolved, the rest
+/// appended (none of it need exist yet).
+pub fn resolved(path: &Path) -> PathBuf {
+    if let Ok(whole) = path.canonicalize() {
+        return whole;
+    }
+    match path.file_name() {
+        Some(name) if path.parent().is_some() => resolved(&parent_dir(path)).join(name),
         _ => path.to_path_buf(),
     }
 }

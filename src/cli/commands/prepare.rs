@@ -7,7 +7,7 @@ use mvpcc::datagen::data::{
     Source, ViewsFrame, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
 };
 use mvpcc::datagen::scan::{PartialParams, MAX_PARTIAL_POINTS};
-use mvpcc::io::atomic_write;
+use mvpcc::io::{atomic_write, resolved};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -34,30 +34,8 @@ struct Summary {
 /// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
 /// Whether `path` (which need not exist yet) is `dir` or lies under it, links followed.
 fn inside(path: &Path, dir: &Path) -> bool {
-    let Ok(dir) = dir.canonicalize() else {
-        return false;
-    };
-    // The deepest part of `path` that exists, resolved, with the rest appended.
-    let mut existing = path.to_path_buf();
-    let mut rest = Vec::new();
-    while !existing.exists() {
-        match (existing.file_name(), existing.parent()) {
-            (Some(name), Some(parent)) => {
-                rest.push(name.to_os_string());
-                existing = if parent.as_os_str().is_empty() {
-                    PathBuf::from(".")
-                } else {
-                    parent.to_path_buf()
-                };
-            }
-            _ => return false,
-        }
-    }
-    let Ok(mut resolved) = existing.canonicalize() else {
-        return false;
-    };
-    resolved.extend(rest.iter().rev());
-    resolved.starts_with(dir)
+    dir.canonicalize()
+        .is_ok_and(|dir| resolved(path).starts_with(dir))
 }
 
 fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {

@@ -1,11 +1,10 @@
 mod cli;
 
-use clap::Parser;
 use cli::args::Cli;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = Cli::parse_negatives();
     match cli::commands::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

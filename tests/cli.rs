@@ -1109,3 +1109,40 @@ fn prepared_views_match_the_reference_dataset_format() {
         );
     }
 }
+
+/// A negative number given to an option reaches that option's own check: clap alone took
+/// `-1` for an unknown flag and said "unexpected argument '-1' found".
+#[test]
+fn negative_values_are_answered_by_the_options_checks() {
+    let dir = TempDir::new().unwrap();
+    let cloud = write(&dir, "car.ply", &car());
+    let out = dir.path().join("out.ply");
+    let (cloud, to) = (s(&cloud), s(&out));
+    fails(
+        &["eval", "--pred", cloud, "--gt", cloud, "--tau", "-1"],
+        "--tau -1",
+        "thresholds must be positive numbers",
+        &out,
+    );
+    for (command, option, problem) in [
+        ("filter", "--sor-std", "-1 is not a number of 0 or more"),
+        (
+            "complete",
+            "--merge-distance",
+            "-1 is not a distance of 0 or more",
+        ),
+    ] {
+        mvpcc()
+            .args([command, cloud, to, option, "-1"])
+            .assert()
+            .code(2)
+            .stderr(predicate::str::contains(problem));
+        assert!(!out.exists());
+    }
+    mvpcc()
+        .args([
+            "complete", cloud, to, "--method", "mirror", "--orient", "-30",
+        ])
+        .assert()
+        .success();
+}

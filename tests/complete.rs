@@ -750,3 +750,23 @@ fn an_include_pattern_that_matches_nothing_is_named() {
         )));
     assert!(!outputs.exists());
 }
+
+/// `--jobs 0` was taken as one job without a word; jobs past the bound would only queue for the
+/// cores. Both are refused before the output folder is made.
+#[test]
+fn batch_jobs_are_bounded() {
+    let dir = TempDir::new().unwrap();
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    let outputs = dir.path().join("out");
+    for jobs in ["0", "257"] {
+        complete_dir(&inputs, &outputs)
+            .args(["--method", "mirror", "--jobs", jobs])
+            .assert()
+            .code(2)
+            .stderr(predicate::str::contains(format!(
+                "{jobs} is not in 1..=256"
+            )));
+        assert!(!outputs.exists());
+    }
+}

@@ -2,7 +2,7 @@
 //! here; what they do lives in [`crate::cli::commands`].
 
 use clap::builder::RangedU64ValueParser;
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
@@ -13,7 +13,7 @@ use mvpcc::datagen::data::CloudPolicy;
 use mvpcc::datagen::mesh::SignedAxis;
 use mvpcc::datagen::scan::{PartialKinds, PartialParams};
 use mvpcc::datagen::synth::Category;
-use mvpcc::io::batch::Shard;
+use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
@@ -36,6 +36,30 @@ pub struct Cli {
     pub quiet: bool,
     #[command(subcommand)]
     pub command: Command,
+}
+
+/// A count from `min` to `max`; clap names the range when refusing one outside it.
+fn counts(min: usize, max: usize) -> RangedU64ValueParser<usize> {
+    RangedU64ValueParser::new().range(min as u64..=max as u64)
+}
+
+impl Cli {
+    /// The command line, every option's value allowed to be a negative number: `--tau -1`
+    /// reaches the option's own check ("thresholds must be positive numbers") where clap alone
+    /// would answer "unexpected argument '-1' found".
+    pub fn parse_negatives() -> Cli {
+        let command = Cli::command().mut_subcommands(|sub| {
+            sub.mut_args(|arg| {
+                let takes_values = arg.get_num_args().is_none_or(|n| n.takes_values());
+                if takes_values && arg.get_action().takes_values() {
+                    arg.allow_negative_numbers(true)
+                } else {
+                    arg
+                }
+            })
+        });
+        Cli::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit())
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -240,8 +264,10 @@ pub struct CompleteArgs {
     /// all, so an existing one is complete).
     #[arg(long, requires = "output_dir")]
     pub skip_existing: bool,
-    /// Batch: files completed at once.
-    #[arg(long, default_value_t = 1)]
+    /// Batch: files completed at once (1–256), by default one per core this process may use
+    /// (each file's reading, orientation and symmetry run on one core while the network
+    /// takes them all).
+    #[arg(long, default_value_t = default_jobs(), value_parser = counts(1, MAX_JOBS))]
     pub jobs: usize,
     /// network, or a baseline: identity (the partial as it is) or mirror (the partial and its
     /// mirror image across the vehicle's long vertical plane).
@@ -744,10 +770,10 @@ pub struct TrainArgs {
     ))]
     pub tv_from_stage: Option<usize>,
     /// Threads that load and render samples while the network trains (1–256).
-    #[arg(long, default_value_t = 1, value_parser = RangedU64ValueParser::<usize>::new().range(1..=MAX_WORKERS as u64))]
+    #[arg(long, default_value_t = 1, value_parser = counts(1, MAX_WORKERS))]
     pub workers: usize,
     /// Steps of data prepared ahead (0–256).
-    #[arg(long, default_value_t = 4, value_parser = RangedU64ValueParser::<usize>::new().range(0..=MAX_PREFETCH as u64))]
+    #[arg(long, default_value_t = 4, value_parser = counts(0, MAX_PREFETCH))]
     pub prefetch: usize,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.
     #[arg(long, default_value_t = DEFAULT_CACHE_MB)]

@@ -10,6 +10,18 @@ use std::collections::HashSet;
 use std::path::{Component, Path, PathBuf};
 use thiserror::Error;
 
+/// Most files one run completes at once: each job is a thread holding a cloud and its views,
+/// and past the cores they only queue for them.
+pub const MAX_JOBS: usize = 256;
+
+/// Files completed at once when not told: one per core this process may use (its affinity and
+/// cgroup quota counted), at most [`MAX_JOBS`]. Outputs do not depend on it.
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(MAX_JOBS)
+}
+
 #[derive(Debug, Error)]
 pub enum BatchError {
     #[error("{}: cannot list: {source}", path.display())]

@@ -376,22 +376,12 @@ pub fn complete(
     let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
-        let mut network = run_network(input, &measured, inpainter, options, &mut timings)?;
-        let start = Instant::now();
-        let outside =
-            drop_outside_box(&mut network.predicted, &measured, plane, options.box_margin);
-        timings.filter += start.elapsed();
-        filtered_out = network.filtered_out + outside;
+        let network = run_network(input, &measured, plane, inpainter, options, &mut timings)?;
+        filtered_out = network.filtered_out;
         views = network.views;
         let start = Instant::now();
         if options.keep_input {
-            let gaps = uncovered(
-                &measured,
-                &added,
-                &network.predicted,
-                options.merge_distance,
-            );
-            let fill = thinned(&gaps, options.thin);
+            let fill = gap_fill(&measured, &added, &network.predicted, options);
             added.extend(network_points(&fill, &measured_index));
         } else {
             keep_input = false;
@@ -489,17 +479,20 @@ fn mirror_images(measured: &[[f64; 3]], index: &KnnIndex, plane: Plane) -> Vec<A
         .collect()
 }
 
-/// What the network made of one object, re-projected and filtered.
+/// What the network made of one object, re-projected and filtered (the outlier filter and the
+/// network's box).
 struct NetworkOutput {
     predicted: PointCloud,
     filtered_out: usize,
     views: Option<NetworkViews>,
 }
 
-/// Projection, inpainting, snapping, re-projection and the outlier filter, timed.
+/// Projection, inpainting, snapping, re-projection, the outlier filter and the network's box
+/// (which needs the symmetry `plane` for its width), timed.
 fn run_network(
     input: &PointCloud,
     measured: &[[f64; 3]],
+    plane: Option<Plane>,
     inpainter: &Inpainter,
     options: &Options,
     timings: &mut Timings,
@@ -529,22 +522,23 @@ fn run_network(
         output: inpainted.clone(),
     });
     // The pixels a copying generator took from its input are measured points.
-    let measured = inpainter.config().copies_input().then_some(&batch[0]);
+    let copied = inpainter.config().copies_input().then_some(&batch[0]);
     if options.snap {
-        snap_to_rays(&mut inpainted, &cameras, measured);
+        snap_to_rays(&mut inpainted, &cameras, copied);
     }
     let reproject_options = ReprojectOptions {
         erode: options.erode,
         smooth: options.smooth,
         ..ReprojectOptions::default()
     };
-    let predicted = reproject_keeping(&inpainted, reproject_options, measured);
+    let predicted = reproject_keeping(&inpainted, reproject_options, copied);
     timings.reprojection = start.elapsed();
 
     let start = Instant::now();
     let keep = inliers(&predicted.positions, options.sor);
-    let filtered_out = keep.iter().filter(|&&k| !k).count();
-    let predicted = predicted.filter(&keep);
+    let mut predicted = predicted.filter(&keep);
+    let outside = drop_outside_box(&mut predicted, measured, plane, options.box_margin);
+    let filtered_out = keep.iter().filter(|&&k| !k).count() + outside;
     timings.filter = start.elapsed();
     Ok(NetworkOutput {
         predicted,
@@ -585,9 +579,16 @@ fn drop_outside_box(
     dropped
 }
 
-/// The network's points thinned to one per cube of side `side` (see [`thin::one_per_cube`]).
-fn thinned(points: &PointCloud, side: f64) -> PointCloud {
-    points.select(&thin::one_per_cube(&points.positions, side))
+/// The network's points where neither a measured point nor an added mirror image lies within
+/// the merge distance, thinned to one per cube of side `thin` (see [`thin::one_per_cube`]).
+fn gap_fill(
+    measured: &[[f64; 3]],
+    added: &[Added],
+    predicted: &PointCloud,
+    options: &Options,
+) -> PointCloud {
+    let gaps = uncovered(measured, added, predicted, options.merge_distance);
+    gaps.select(&thin::one_per_cube(&gaps.positions, options.thin))
 }
 
 /// The network's points with no measured point or added mirror image within `tolerance`.

@@ -254,24 +254,7 @@ pub fn generator_losses(
         _ => zero(),
     };
     let (perceptual, style) = match (weights.compares_features(), vgg, &fake) {
-        (true, Some(vgg), _) => {
-            let fake = vgg.forward(as_rgb(output.images.clone() * probability));
-            let real: Vec<Tensor<4>> = vgg
-                .forward(as_rgb(target.images.clone() * target.occupancy.clone()))
-                .into_iter()
-                .map(|f| f.detach())
-                .collect();
-            let pick = |maps: &[Tensor<4>], layers: &[usize]| -> Vec<Tensor<4>> {
-                layers.iter().map(|&k| maps[k].clone()).collect()
-            };
-            (
-                self::perceptual(
-                    &pick(&fake, &PERCEPTUAL_LAYERS),
-                    &pick(&real, &PERCEPTUAL_LAYERS),
-                ),
-                self::style(&pick(&fake, &STYLE_LAYERS), &pick(&real, &STYLE_LAYERS)),
-            )
-        }
+        (true, Some(vgg), _) => vgg_losses(vgg, output, probability, target),
         (true, None, Some(fake)) => (
             self::perceptual(&fake.features, real_features),
             self::style(&fake.features, real_features),
@@ -307,6 +290,36 @@ pub fn generator_losses(
         depth,
         total,
     }
+}
+
+/// The perceptual and style terms on VGG19's features of the masked views, the real views'
+/// features held constant.
+///
+/// # Shapes
+/// - `probability`: `[batch, views, 1, S, S]`, the occupancy after the sigmoid
+/// - returns two `[1]` scalars
+fn vgg_losses(
+    vgg: &Vgg19,
+    output: &GeneratorOutput,
+    probability: Tensor<5>,
+    target: &Target,
+) -> (Tensor<1>, Tensor<1>) {
+    let fake = vgg.forward(as_rgb(output.images.clone() * probability));
+    let real: Vec<Tensor<4>> = vgg
+        .forward(as_rgb(target.images.clone() * target.occupancy.clone()))
+        .into_iter()
+        .map(|f| f.detach())
+        .collect();
+    let pick = |maps: &[Tensor<4>], layers: &[usize]| -> Vec<Tensor<4>> {
+        layers.iter().map(|&k| maps[k].clone()).collect()
+    };
+    (
+        perceptual(
+            &pick(&fake, &PERCEPTUAL_LAYERS),
+            &pick(&real, &PERCEPTUAL_LAYERS),
+        ),
+        style(&pick(&fake, &STYLE_LAYERS), &pick(&real, &STYLE_LAYERS)),
+    )
 }
 
 #[cfg(test)]

@@ -168,9 +168,10 @@ const LIMITS: [(&str, usize); 5] = [
     ("views", crate::core::camera::RIG_SIZE),
 ];
 
-/// The largest micro-batch `train`, `train-orient` and `profile` accept. The relay trains with 4; a batch of
-/// 100,000 asked the allocator for 183 GB and aborted the process, so a mistyped batch is
-/// refused with a message instead. Below it a batch can still outgrow the machine's memory.
+/// The largest micro-batch `train`, `train-orient` and `profile` accept. The relay trains with
+/// 4; a batch of 100,000 asked the allocator for 183 GB and aborted the process, so a mistyped
+/// batch is refused with a message instead. Below it a batch can still outgrow the machine's
+/// memory.
 pub const MAX_BATCH: usize = 1024;
 
 impl ModelConfig {

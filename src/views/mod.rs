@@ -9,7 +9,7 @@ use crate::core::camera::RIG_SIZE;
 use crate::core::frame::{Frame, UpAxis};
 use crate::io::atomic_write;
 use crate::views::projection::{ViewImages, CHANNELS};
-use image::ImageEncoder;
+use image::{ImageBuffer, ImageEncoder, Rgb, RgbImage};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -230,74 +230,101 @@ pub fn read_views(dir: &Path, cameras: Option<&[usize]>) -> Result<ViewImages, V
     let mut images: Option<ViewImages> = None;
     for (v, &camera) in cameras.iter().enumerate() {
         let lpath = locations_path(dir, camera);
-        if !lpath.exists() {
-            return Err(ViewError::MissingView {
-                path: dir.to_path_buf(),
-                camera,
+        let locations = read_locations(dir, camera)?;
+        let s = locations.width() as usize;
+        let cpath = color_path(dir, camera);
+        let images =
+            images.get_or_insert_with(|| ViewImages::empty(cameras.clone(), s, cpath.exists()));
+        if images.size != s {
+            return Err(ViewError::Invalid {
+                path: lpath,
+                problem: format!("size {s} differs from the first view's {}", images.size),
             });
         }
-        let invalid = |problem: String| ViewError::Invalid {
-            path: lpath.clone(),
-            problem,
-        };
-        let loc = match open(&lpath)? {
-            image::DynamicImage::ImageRgb16(buf) => buf,
-            other => {
-                return Err(invalid(format!(
-                    "expected a 16-bit RGB image, found {:?}",
-                    other.color()
-                )))
-            }
-        };
-        let (w, h) = loc.dimensions();
-        if w != h || w < 8 {
-            return Err(invalid(format!(
-                "expected a square image of at least 8 px, found {w}×{h}"
-            )));
-        }
-        let s = w as usize;
-        let has_color = color_path(dir, camera).exists();
-        let images = images.get_or_insert_with(|| ViewImages::empty(cameras.clone(), s, has_color));
-        if images.size != s {
-            return Err(invalid(format!(
-                "size {s} differs from the first view's {}",
-                images.size
-            )));
-        }
-        let plane = s * s;
-        let cpath = color_path(dir, camera);
         let color = if images.has_color && cpath.exists() {
-            let c = open(&cpath)?.to_rgb8();
-            if c.dimensions() != (w, h) {
-                return Err(ViewError::Invalid {
-                    path: cpath,
-                    problem: format!("size {:?} differs from its locations image", c.dimensions()),
-                });
-            }
-            Some(c)
+            Some(read_color(&cpath, locations.dimensions())?)
         } else {
             None
         };
+        let plane = s * s;
         let px = &mut images.pixels[v * CHANNELS * plane..(v + 1) * CHANNELS * plane];
         let occ = &mut images.occupancy[v * plane..(v + 1) * plane];
-        for (at, p) in loc.pixels().enumerate() {
-            let [z, y, x] = p.0;
-            if x == 0 && y == 0 && z == 0 {
-                continue;
-            }
-            occ[at] = true;
-            px[at] = decode_coordinate(x);
-            px[plane + at] = decode_coordinate(y);
-            px[2 * plane + at] = decode_coordinate(z);
-            if let Some(color) = &color {
-                let rgb = color.as_raw();
-                for c in 0..3 {
-                    px[(3 + c) * plane + at] = rgb[at * 3 + c] as f32 / 255.0;
-                }
+        decode_view(&locations, color.as_ref(), px, occ);
+    }
+    Ok(images.expect("find_views returns at least one camera"))
+}
+
+/// Camera `camera`'s `locations_NNN.png` in `dir`: a square 16-bit RGB image of at least 8 px.
+fn read_locations(dir: &Path, camera: usize) -> Result<ImageBuffer<Rgb<u16>, Vec<u16>>, ViewError> {
+    let path = locations_path(dir, camera);
+    if !path.exists() {
+        return Err(ViewError::MissingView {
+            path: dir.to_path_buf(),
+            camera,
+        });
+    }
+    let invalid = |problem: String| ViewError::Invalid {
+        path: path.clone(),
+        problem,
+    };
+    let locations = match open(&path)? {
+        image::DynamicImage::ImageRgb16(buf) => buf,
+        other => {
+            return Err(invalid(format!(
+                "expected a 16-bit RGB image, found {:?}",
+                other.color()
+            )))
+        }
+    };
+    let (w, h) = locations.dimensions();
+    if w != h || w < 8 {
+        return Err(invalid(format!(
+            "expected a square image of at least 8 px, found {w}×{h}"
+        )));
+    }
+    Ok(locations)
+}
+
+/// A `color_NNN.png` that must be as large as its locations image, `size`.
+fn read_color(path: &Path, size: (u32, u32)) -> Result<RgbImage, ViewError> {
+    let color = open(path)?.to_rgb8();
+    if color.dimensions() != size {
+        return Err(ViewError::Invalid {
+            path: path.to_path_buf(),
+            problem: format!(
+                "size {:?} differs from its locations image",
+                color.dimensions()
+            ),
+        });
+    }
+    Ok(color)
+}
+
+/// Decodes one view's images into its planes: `px` holds the view's six planes of S × S
+/// values (x, y, z, r, g, b), `occ` its S × S occupancy. Pixels coded 0 stay empty.
+fn decode_view(
+    locations: &ImageBuffer<Rgb<u16>, Vec<u16>>,
+    color: Option<&RgbImage>,
+    px: &mut [f32],
+    occ: &mut [bool],
+) {
+    let plane = occ.len();
+    for (at, p) in locations.pixels().enumerate() {
+        let [z, y, x] = p.0;
+        if x == 0 && y == 0 && z == 0 {
+            continue;
+        }
+        occ[at] = true;
+        px[at] = decode_coordinate(x);
+        px[plane + at] = decode_coordinate(y);
+        px[2 * plane + at] = decode_coordinate(z);
+        if let Some(color) = color {
+            let rgb = color.as_raw();
+            for c in 0..3 {
+                px[(3 + c) * plane + at] = rgb[at * 3 + c] as f32 / 255.0;
             }
         }
     }
-    Ok(images.expect("find_views returns at least one camera"))
 }
 
 #[cfg(test)]

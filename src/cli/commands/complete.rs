@@ -227,16 +227,7 @@ fn complete_file(
     completer: &Completer,
     log: Log,
 ) -> anyhow::Result<FileReport> {
-    check_output(output, &[input])?;
-    if let Some(preview) = &args.preview {
-        check_output(preview, &[input])?;
-        if same_file(preview, output) {
-            bail!("{}: --preview names the output cloud", preview.display());
-        }
-    }
-    if let Some(dir) = views.as_ref().filter(|d| d.exists() && !d.is_dir()) {
-        bail!("{}: --save-views needs a directory", dir.display());
-    }
+    check_paths(input, output, views.as_deref(), args)?;
     let format = output_format(args, input, output)?;
     let start = Instant::now();
     let cloud = load(input, args.input_options.format, log)?;
@@ -276,7 +267,40 @@ fn complete_file(
     if let Some(dir) = &views {
         save_views(dir, input, done, log)?;
     }
-    log.info(format!(
+    log.info(summary(output, &run, &timings));
+    if args.timings && !args.json {
+        for (name, d) in timings.stages() {
+            eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
+        }
+    }
+    Ok(report(input, output, args, run, &timings))
+}
+
+/// Refuses, before anything is read, an output or `--preview` that would take the place of the
+/// input, a preview over the output, and `--save-views` naming a file.
+fn check_paths(
+    input: &Path,
+    output: &Path,
+    views: Option<&Path>,
+    args: &CompleteArgs,
+) -> anyhow::Result<()> {
+    check_output(output, &[input])?;
+    if let Some(preview) = &args.preview {
+        check_output(preview, &[input])?;
+        if same_file(preview, output) {
+            bail!("{}: --preview names the output cloud", preview.display());
+        }
+    }
+    if let Some(dir) = views.filter(|d| d.exists() && !d.is_dir()) {
+        bail!("{}: --save-views needs a directory", dir.display());
+    }
+    Ok(())
+}
+
+/// The line logged for one completed file.
+fn summary(output: &Path, run: &Run, timings: &Timings) -> String {
+    let done = &run.completion;
+    format!(
         "{}: {} points → {} ({} completed{}{}) in {:.2} s",
         output.display(),
         done.input_points,
@@ -292,13 +316,7 @@ fn complete_file(
             run.orientation.method
         )),
         timings.total().as_secs_f64()
-    ));
-    if args.timings && !args.json {
-        for (name, d) in timings.stages() {
-            eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
-        }
-    }
-    Ok(report(input, output, args, run, &timings))
+    )
 }
 
 /// The `--json` report of one completed file.
@@ -528,7 +546,7 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
     let bar = progress(files.len(), "completing", log);
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<(usize, BatchEntry)>> = Mutex::new(Vec::new());
-    let jobs = args.jobs.clamp(1, files.len().max(1));
+    let jobs = args.jobs.min(files.len()).max(1);
     std::thread::scope(|scope| {
         for _ in 0..jobs {
             scope.spawn(|| loop {

@@ -31,13 +31,13 @@ struct Summary {
     manifest: Option<String>,
 }
 
-/// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
 /// Whether `path` (which need not exist yet) is `dir` or lies under it, links followed.
 fn inside(path: &Path, dir: &Path) -> bool {
     dir.canonicalize()
         .is_ok_and(|dir| resolved(path).starts_with(dir))
 }
 
+/// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
 fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {
     match (&args.meshes, args.synth) {
         (Some(dir), _) => {

@@ -84,88 +84,115 @@ fn read_checked(path: &Path) -> Result<Mesh, MeshError> {
         stack.extend(node.children().map(|c| (c, world)));
         let Some(gmesh) = node.mesh() else { continue };
         for primitive in gmesh.primitives() {
-            if primitive.mode() != ::gltf::mesh::Mode::Triangles {
-                continue;
+            if let Some(part) =
+                primitive_mesh(&primitive, &buffers, &textures, &world).map_err(fail)?
+            {
+                mesh.append(part);
             }
-            let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-            let Some(positions) = reader.read_positions() else {
-                continue;
-            };
-            let positions: Vec<[f32; 3]> = positions
-                .map(|p| {
-                    let q = world.transform_point(&Point3::from(p));
-                    [q.x, q.y, q.z]
-                })
-                .collect();
-            let n = positions.len() as u32;
-            // The gltf crate panics on indices that are not unsigned integers.
-            if let Some(accessor) = primitive.indices() {
-                use ::gltf::accessor::DataType;
-                let kind = accessor.data_type();
-                if !matches!(kind, DataType::U8 | DataType::U16 | DataType::U32) {
-                    return Err(fail(format!(
-                        "triangle indices stored as {kind:?}, not unsigned integers"
-                    )));
-                }
-            }
-            let indices: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..n).collect(),
-            };
-            if indices.iter().any(|&i| i >= n) {
-                return Err(fail(
-                    "a triangle refers to a vertex that does not exist".into(),
-                ));
-            }
-            let pbr = primitive.material().pbr_metallic_roughness();
-            let factor = pbr.base_color_factor();
-            let texture_info = pbr.base_color_texture();
-            let texture = texture_info.as_ref().and_then(|t| {
-                textures
-                    .get(t.texture().source().index())
-                    .cloned()
-                    .flatten()
-            });
-            let uv_set = texture_info.as_ref().map_or(0, |t| t.tex_coord());
-            let uvs: Option<Vec<[f32; 2]>> = texture
-                .as_ref()
-                .and_then(|_| reader.read_tex_coords(uv_set))
-                .map(|t| t.into_f32().collect());
-            let colors: Option<Vec<[f32; 3]>> = reader
-                .read_colors(0)
-                .map(|c| c.into_rgb_f32().map(|c| c.map(linear_to_srgb)).collect());
-            let mut part = Mesh {
-                materials: vec![Material {
-                    name: format!("material_{}", primitive.material().index().unwrap_or(0)),
-                    color: [factor[0], factor[1], factor[2]].map(linear_to_srgb),
-                    texture: uvs.as_ref().and(texture),
-                }],
-                vertex_colors: colors,
-                ..Mesh::default()
-            };
-            for tri in indices.chunks_exact(3) {
-                part.triangles.push([tri[0], tri[1], tri[2]]);
-                part.material_of.push(0);
-            }
-            if let Some(uvs) = &uvs {
-                // glTF's v runs downwards; Mesh keeps OBJ's upward v.
-                part.corner_uv = Some(
-                    part.triangles
-                        .iter()
-                        .map(|t| {
-                            t.map(|i| {
-                                let [u, v] = uvs.get(i as usize).copied().unwrap_or([0.0; 2]);
-                                [u, 1.0 - v]
-                            })
-                        })
-                        .collect(),
-                );
-            }
-            part.positions = positions;
-            mesh.append(part);
         }
     }
     Ok(mesh)
+}
+
+/// One primitive's triangles placed by its node's `world` transform, with its material;
+/// `None` for primitives of other modes or without positions.
+fn primitive_mesh(
+    primitive: &::gltf::Primitive,
+    buffers: &[::gltf::buffer::Data],
+    textures: &[Option<Arc<RgbImage>>],
+    world: &Matrix4<f32>,
+) -> Result<Option<Mesh>, String> {
+    if primitive.mode() != ::gltf::mesh::Mode::Triangles {
+        return Ok(None);
+    }
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let Some(positions) = reader.read_positions() else {
+        return Ok(None);
+    };
+    let positions: Vec<[f32; 3]> = positions
+        .map(|p| {
+            let q = world.transform_point(&Point3::from(p));
+            [q.x, q.y, q.z]
+        })
+        .collect();
+    let indices = triangle_indices(primitive, &reader, positions.len() as u32)?;
+    let pbr = primitive.material().pbr_metallic_roughness();
+    let factor = pbr.base_color_factor();
+    let texture_info = pbr.base_color_texture();
+    let texture = texture_info.as_ref().and_then(|t| {
+        textures
+            .get(t.texture().source().index())
+            .cloned()
+            .flatten()
+    });
+    let uv_set = texture_info.as_ref().map_or(0, |t| t.tex_coord());
+    let uvs: Option<Vec<[f32; 2]>> = texture
+        .as_ref()
+        .and_then(|_| reader.read_tex_coords(uv_set))
+        .map(|t| t.into_f32().collect());
+    let colors: Option<Vec<[f32; 3]>> = reader
+        .read_colors(0)
+        .map(|c| c.into_rgb_f32().map(|c| c.map(linear_to_srgb)).collect());
+    let triangles: Vec<[u32; 3]> = indices
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]])
+        .collect();
+    Ok(Some(Mesh {
+        materials: vec![Material {
+            name: format!("material_{}", primitive.material().index().unwrap_or(0)),
+            color: [factor[0], factor[1], factor[2]].map(linear_to_srgb),
+            texture: uvs.as_ref().and(texture),
+        }],
+        vertex_colors: colors,
+        corner_uv: uvs.map(|uvs| corner_uvs(&triangles, &uvs)),
+        material_of: vec![0; triangles.len()],
+        triangles,
+        positions,
+    }))
+}
+
+/// A primitive's vertex indices, three per triangle (its vertices in order when it has none),
+/// each checked against the `n` vertices.
+fn triangle_indices<'a, 's, F>(
+    primitive: &::gltf::Primitive,
+    reader: &::gltf::mesh::Reader<'a, 's, F>,
+    n: u32,
+) -> Result<Vec<u32>, String>
+where
+    F: Clone + Fn(::gltf::Buffer<'a>) -> Option<&'s [u8]>,
+{
+    // The gltf crate panics on indices that are not unsigned integers.
+    if let Some(accessor) = primitive.indices() {
+        use ::gltf::accessor::DataType;
+        let kind = accessor.data_type();
+        if !matches!(kind, DataType::U8 | DataType::U16 | DataType::U32) {
+            return Err(format!(
+                "triangle indices stored as {kind:?}, not unsigned integers"
+            ));
+        }
+    }
+    let indices: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None => (0..n).collect(),
+    };
+    if indices.iter().any(|&i| i >= n) {
+        return Err("a triangle refers to a vertex that does not exist".into());
+    }
+    Ok(indices)
+}
+
+/// Each triangle corner's texture coordinate; glTF's v runs downwards, `Mesh` keeps OBJ's
+/// upward v.
+fn corner_uvs(triangles: &[[u32; 3]], uvs: &[[f32; 2]]) -> Vec<[[f32; 2]; 3]> {
+    triangles
+        .iter()
+        .map(|t| {
+            t.map(|i| {
+                let [u, v] = uvs.get(i as usize).copied().unwrap_or([0.0; 2]);
+                [u, 1.0 - v]
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]

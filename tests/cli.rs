@@ -113,6 +113,18 @@ fn eval_reproduces_the_reference_fixture() {
         .stdout(
             predicate::str::contains("cd_l2_half").and(predicate::str::contains("3.730410e-1")),
         );
+    // Thresholds label their columns as written, in exponent form where that would be long.
+    mvpcc()
+        .args(["eval", "--pred", s(&p), "--gt", s(&g)])
+        .args(["--tau", "0.015,1e308,0.0000001"])
+        .assert()
+        .success()
+        .stdout(
+            predicate::str::contains("f1@0.015")
+                .and(predicate::str::contains("prec@1e308"))
+                .and(predicate::str::contains("rec@1e-7"))
+                .and(predicate::str::contains("000000000").not()),
+        );
 }
 
 #[test]
@@ -696,7 +708,7 @@ fn synth_is_deterministic_and_writes_a_preview() {
     fails(
         &["synth", "--count", "0", "--out", "x"],
         "--count",
-        "at least 1",
+        "must lie in 1..=100000, got 0",
         Path::new("x"),
     );
 }

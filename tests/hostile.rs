@@ -292,7 +292,8 @@ fn weights_that_are_garbage_or_declare_huge_networks() {
 }
 
 /// Sizes and batches that would take hundreds of gigabytes: each aborted the process on an
-/// allocation (and a batch of 0 crashed `train-orient`) before these were refused.
+/// allocation (and a batch of 0 crashed `train-orient`) before these were refused. Counts of
+/// objects and samples past theirs wrote until the disk was full.
 #[test]
 fn sizes_and_batches_beyond_the_limits() {
     let dir = TempDir::new().unwrap();
@@ -306,6 +307,8 @@ fn sizes_and_batches_beyond_the_limits() {
     let profile: &[&str] = &["profile", "--config", "tiny"];
     let train: &[&str] = &["train", "--data", from, "--out", to];
     let orient: &[&str] = &["train-orient", "--data", from, "--out", to];
+    let synth: &[&str] = &["synth", "--out", to];
+    let synth_prepare: &[&str] = &["prepare", "--out", to];
     let over_1024 = "above the largest this build accepts (1024)";
     let cases = [
         (
@@ -326,7 +329,31 @@ fn sizes_and_batches_beyond_the_limits() {
             "--max-points 100000000000",
             "above the largest partial this build scans (10000000)",
         ),
+        (
+            prepare,
+            ["--samples", "100000"],
+            "--samples",
+            "must lie in 1..=1000, got 100000",
+        ),
+        (
+            synth,
+            ["--count", "100000000000"],
+            "--count",
+            "must lie in 1..=100000, got 100000000000",
+        ),
+        (
+            synth_prepare,
+            ["--synth", "0"],
+            "--synth",
+            "must lie in 1..=100000, got 0",
+        ),
         (profile, ["--batch", "100000"], "--batch 100000", over_1024),
+        (
+            train,
+            ["--accumulate", "5000"],
+            "accumulate 5000",
+            over_1024,
+        ),
         (train, ["--batch", "100000"], "batch 100000", over_1024),
         (orient, ["--batch", "0"], "batch 0", "1 to 1024 expected"),
         (

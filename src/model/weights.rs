@@ -20,13 +20,18 @@ pub const ASSETS_GENERATOR_FILE: &str = "model.safetensors";
 
 /// The generator's weights in `dir`: a run's [`GENERATOR_FILE`] or assets/'
 /// [`ASSETS_GENERATOR_FILE`], so that `--model` and `--init` take either folder.
-pub fn generator_in(dir: &Path) -> Result<PathBuf, String> {
+pub fn generator_in(dir: &Path) -> Result<PathBuf, NoGenerator> {
     [GENERATOR_FILE, ASSETS_GENERATOR_FILE]
         .iter()
         .map(|name| dir.join(name))
         .find(|p| p.is_file())
-        .ok_or_else(|| format!("holds neither {GENERATOR_FILE} nor {ASSETS_GENERATOR_FILE}"))
+        .ok_or_else(|| NoGenerator(dir.to_path_buf()))
 }
+
+/// A folder given for a model that holds no generator's weights.
+#[derive(Debug, Error)]
+#[error("{}: holds neither {GENERATOR_FILE} nor {ASSETS_GENERATOR_FILE}", .0.display())]
+pub struct NoGenerator(pub PathBuf);
 
 const KEY_KIND: &str = "mvpcc.network";
 const KEY_VERSION: &str = "mvpcc.format_version";

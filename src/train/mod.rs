@@ -92,10 +92,7 @@ impl InitWeights {
     /// `discriminator` overrides that one.
     pub fn find(path: &Path, discriminator: Option<PathBuf>) -> Result<InitWeights, TrainError> {
         let generator = if path.is_dir() {
-            weights::generator_in(path).map_err(|problem| TrainError::Run {
-                path: path.to_path_buf(),
-                problem: format!("--init: {problem}"),
-            })?
+            weights::generator_in(path)?
         } else {
             path.to_path_buf()
         };
@@ -206,11 +203,20 @@ impl Default for TrainSettings {
     }
 }
 
+/// The most micro-batches one optimizer step accumulates: with the largest batch that is a
+/// million samples a step, where a mistyped count would run one step for days.
+pub const MAX_ACCUMULATE: usize = 1024;
+
 impl TrainSettings {
     /// Refuses settings no run can train with.
     pub fn validate(&self) -> Result<(), SettingsError> {
         let problem = if self.batch == 0 || self.accumulate == 0 {
             "batch and accumulate must be at least 1"
+        } else if self.accumulate > MAX_ACCUMULATE {
+            return Err(SettingsError(format!(
+                "accumulate {} is above the largest this build accepts ({MAX_ACCUMULATE})",
+                self.accumulate
+            )));
         } else if self.batch > crate::model::MAX_BATCH {
             return Err(SettingsError(format!(
                 "batch {} is above the largest this build accepts ({})",
@@ -259,6 +265,8 @@ pub enum TrainError {
     },
     #[error("{}: {problem}", path.display())]
     Run { path: PathBuf, problem: String },
+    #[error("--init: {0}")]
+    NoGenerator(#[from] weights::NoGenerator),
     /// A weights file (`--init`, `--vgg19`) that cannot be used; `context` names the option.
     #[error("{}: {context}{source}", path.display())]
     Weights {
@@ -675,10 +683,11 @@ mod tests {
     #[test]
     fn default_settings_are_valid_and_broken_ones_are_refused() {
         assert!(TrainSettings::default().validate().is_ok());
-        let broken: [fn(&mut TrainSettings); 7] = [
+        let broken: [fn(&mut TrainSettings); 8] = [
             |s| s.batch = 0,
             |s| s.batch = crate::model::MAX_BATCH + 1,
             |s| s.accumulate = 0,
+            |s| s.accumulate = MAX_ACCUMULATE + 1,
             |s| s.val_fraction = 1.0,
             |s| s.stage_rates = vec![1e-4, f64::NAN],
             |s| s.stage_steps = 0,

@@ -63,7 +63,7 @@ fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Re
     let inpainter = match path {
         Some(path) => {
             let file = if path.is_dir() {
-                generator_in(path).map_err(|problem| anyhow!("{}: {problem}", path.display()))?
+                generator_in(path)?
             } else {
                 path.to_path_buf()
             };

@@ -219,6 +219,17 @@ struct Table {
     lines: Vec<String>,
 }
 
+/// A threshold as a column's label: as written where that is short, in exponent form where
+/// it is not (`--tau 1e308` made three 310-character labels).
+fn tau_label(tau: f64) -> String {
+    let plain = tau.to_string();
+    if plain.len() <= 8 {
+        plain
+    } else {
+        format!("{tau:e}")
+    }
+}
+
 impl Table {
     fn row(&mut self, name: &str, cells: &[String]) {
         let mut line = format!("{name:<24}");
@@ -240,7 +251,7 @@ impl Table {
             cells.extend(["cd_l2_half", "cd_l1", "cd_l2"].map(String::from));
         }
         if metrics.contains(&Metric::F1) {
-            for t in taus {
+            for t in taus.iter().map(|&t| tau_label(t)) {
                 cells.extend([format!("f1@{t}"), format!("prec@{t}"), format!("rec@{t}")]);
             }
         }

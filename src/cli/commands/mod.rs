@@ -68,11 +68,12 @@ pub(crate) fn open_device(choice: DeviceChoice, log: Log) -> anyhow::Result<Open
 /// Reads a cloud, warning about points dropped for NaN or infinite coordinates.
 pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Result<PointCloud> {
     let loaded = read_cloud(path, format)?;
-    if loaded.non_finite_dropped > 0 {
+    let dropped = loaded.non_finite_dropped;
+    if dropped > 0 {
+        let points = if dropped == 1 { "point" } else { "points" };
         log.warn(format!(
-            "{}: dropped {} points with NaN or infinite coordinates",
-            path.display(),
-            loaded.non_finite_dropped
+            "{}: dropped {dropped} {points} with NaN or infinite coordinates",
+            path.display()
         ));
     }
     Ok(loaded.cloud)

@@ -4,7 +4,7 @@ use anyhow::{bail, Context};
 use mvpcc::core::camera::{check_view_set, MAX_IMAGE_SIZE};
 use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
-    Source, ViewsFrame, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
+    Source, ViewsFrame, MANIFEST_FILE, MAX_SAMPLES, PARAMS_FILE, TEST, TRAIN,
 };
 use mvpcc::datagen::scan::{PartialParams, MAX_PARTIAL_POINTS};
 use mvpcc::io::{atomic_write, resolved};
@@ -132,8 +132,14 @@ fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
     if !(0.0..=1.0).contains(&args.split) {
         bail!("--split must lie in [0, 1], got {}", args.split);
     }
-    if args.samples == 0 {
-        bail!("--samples must be at least 1");
+    if !(1..=MAX_SAMPLES).contains(&args.samples) {
+        bail!(
+            "--samples must lie in 1..={MAX_SAMPLES}, got {}",
+            args.samples
+        );
+    }
+    if let Some(count) = args.synth {
+        synth::check_count(count, "--synth")?;
     }
     if args.size < 8 || args.gt_size < 8 {
         bail!("--size and --gt-size must be at least 8 pixels");

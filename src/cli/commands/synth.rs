@@ -2,7 +2,7 @@ use super::Log;
 use crate::cli::args::SynthArgs;
 use anyhow::{bail, Context};
 use mvpcc::datagen::mesh::{write_obj, Mesh};
-use mvpcc::datagen::synth::{contact_sheet, synthesize, Category};
+use mvpcc::datagen::synth::{contact_sheet, synthesize, Category, MAX_OBJECTS};
 use mvpcc::io::atomic_write;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -33,6 +33,7 @@ pub(super) struct SynthEntry {
 }
 
 pub(super) fn run(args: SynthArgs, log: Log) -> anyhow::Result<()> {
+    check_count(args.count, "--count")?;
     generate(
         &args.out,
         args.count,
@@ -41,6 +42,14 @@ pub(super) fn run(args: SynthArgs, log: Log) -> anyhow::Result<()> {
         args.preview,
         log,
     )?;
+    Ok(())
+}
+
+/// Refuses an object count outside 1..=[`MAX_OBJECTS`], naming the option it came from.
+pub(super) fn check_count(count: usize, option: &str) -> anyhow::Result<()> {
+    if !(1..=MAX_OBJECTS).contains(&count) {
+        bail!("{option} must lie in 1..={MAX_OBJECTS}, got {count}");
+    }
     Ok(())
 }
 
@@ -54,9 +63,6 @@ pub(super) fn generate(
     preview: bool,
     log: Log,
 ) -> anyhow::Result<SynthManifest> {
-    if count == 0 {
-        bail!("--count must be at least 1");
-    }
     if out.exists() && !out.is_dir() {
         bail!("{}: exists and is not a directory", out.display());
     }

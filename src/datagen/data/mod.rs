@@ -176,6 +176,10 @@ pub enum CloudPolicy {
     Gt,
 }
 
+/// The most partial samples `prepare` makes of one model, fifty times the default: each is a
+/// scan and its views on disk, and a mistyped count would write until the disk is full.
+pub const MAX_SAMPLES: usize = 1000;
+
 /// Everything that determines a data directory's content.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PrepareParams {

@@ -63,6 +63,10 @@ pub struct Synthesized {
     pub mesh: Mesh,
 }
 
+/// The most objects one run makes: they are named CATEGORY_NNNNN, and at about 100 kB a mesh
+/// that many fill 10 GB, where a mistyped count would write until the disk is full.
+pub const MAX_OBJECTS: usize = 100_000;
+
 /// Object `index` of a run with `seed` over `categories` (weighted by `Category::weight`).
 /// Depends only on these three, not on how many objects the run makes.
 pub fn synthesize(index: usize, seed: u64, categories: &[Category]) -> Synthesized {

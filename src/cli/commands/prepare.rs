@@ -128,7 +128,35 @@ fn write_manifest(
     Ok(path.display().to_string())
 }
 
+/// The settings the options give, checked ([`check`]).
 fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
+    check(args)?;
+    Ok(PrepareParams {
+        views: args.views.0.clone(),
+        size: args.size,
+        gt_size: args.gt_size,
+        gt_voxel: args.gt_voxel,
+        samples: args.samples,
+        train_fraction: args.split,
+        partial: PartialParams {
+            kinds: args.partial,
+            min_points: args.min_points,
+            max_points: args.max_points,
+            max_yaw_deg: args.yaw_error,
+            max_noise: args.noise,
+        },
+        up: args.up.to_string(),
+        forward: args.forward.to_string(),
+        seed: args.synth_options.seed,
+        clouds: args.clouds,
+        allow_missing_materials: args.allow_missing_materials,
+        max_triangles: args.max_triangles,
+        views_frame: ViewsFrame::Object,
+    })
+}
+
+/// Refuses options no data can be made with, before anything is written.
+fn check(args: &PrepareArgs) -> anyhow::Result<()> {
     if !(0.0..=1.0).contains(&args.split) {
         bail!("--split must lie in [0, 1], got {}", args.split);
     }
@@ -171,28 +199,7 @@ fn params(args: &PrepareArgs) -> anyhow::Result<PrepareParams> {
         );
     }
     check_view_set(&args.views.0)?;
-    Ok(PrepareParams {
-        views: args.views.0.clone(),
-        size: args.size,
-        gt_size: args.gt_size,
-        gt_voxel: args.gt_voxel,
-        samples: args.samples,
-        train_fraction: args.split,
-        partial: PartialParams {
-            kinds: args.partial,
-            min_points: args.min_points,
-            max_points: args.max_points,
-            max_yaw_deg: args.yaw_error,
-            max_noise: args.noise,
-        },
-        up: args.up.to_string(),
-        forward: args.forward.to_string(),
-        seed: args.synth_options.seed,
-        clouds: args.clouds,
-        allow_missing_materials: args.allow_missing_materials,
-        max_triangles: args.max_triangles,
-        views_frame: ViewsFrame::Object,
-    })
+    Ok(())
 }
 
 /// Records the settings on first use; a resumed run must use the same ones, or the
@@ -239,22 +246,7 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("{}: exists and is not a directory", out.display());
     }
-    let meshes = meshes_dir(&args, log)?;
-    if args.meshes.is_some() && inside(out, &meshes) {
-        bail!(
-            "{}: --out lies in the --meshes folder {}, whose next scan would read its clouds as meshes",
-            out.display(),
-            meshes.display()
-        );
-    }
-    // Found before anything is written, so a folder without meshes leaves no output behind.
-    let (mut sources, mut skipped) = discover(&meshes)?;
-    if sources.is_empty() {
-        bail!(
-            "{}: no meshes found (.obj, .ply, .gltf, .glb)",
-            meshes.display()
-        );
-    }
+    let (meshes, mut sources, mut skipped) = find_meshes(&args, log)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     claim(out, &params)?;
     if let Some(shard) = args.shard {
@@ -306,6 +298,31 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
         bail!("{}: none of the meshes could be used", meshes.display());
     }
     Ok(())
+}
+
+/// The meshes folder and what it holds: the meshes to prepare and the files skipped. A
+/// `--meshes` folder is read before anything is written under `--out`, so one without meshes
+/// leaves no output behind; an `--out` inside it is refused.
+fn find_meshes(
+    args: &PrepareArgs,
+    log: Log,
+) -> anyhow::Result<(PathBuf, Vec<Source>, Vec<Skipped>)> {
+    let meshes = meshes_dir(args, log)?;
+    if args.meshes.is_some() && inside(&args.out, &meshes) {
+        bail!(
+            "{}: --out lies in the --meshes folder {}, whose next scan would read its clouds as meshes",
+            args.out.display(),
+            meshes.display()
+        );
+    }
+    let (sources, skipped) = discover(&meshes)?;
+    if sources.is_empty() {
+        bail!(
+            "{}: no meshes found (.obj, .ply, .gltf, .glb)",
+            meshes.display()
+        );
+    }
+    Ok((meshes, sources, skipped))
 }
 
 /// The models of `sources` a previous run finished (their entries) and those still to do.

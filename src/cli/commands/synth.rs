@@ -67,19 +67,15 @@ pub(super) fn generate(
         bail!("{}: exists and is not a directory", out.display());
     }
     let manifest_path = out.join(SYNTH_FILE);
-    if let Ok(text) = std::fs::read_to_string(&manifest_path) {
-        if let Ok(done) = serde_json::from_str::<SynthManifest>(&text) {
-            if done.seed == seed && done.categories == categories && done.objects.len() == count {
-                log.info(format!(
-                    "{}: {count} objects already generated",
-                    out.display()
-                ));
-                if preview {
-                    write_preview(out, &done, log)?;
-                }
-                return Ok(done);
-            }
+    if let Some(done) = already_generated(&manifest_path, count, categories, seed) {
+        log.info(format!(
+            "{}: {count} objects already generated",
+            out.display()
+        ));
+        if preview {
+            write_preview(out, &done, log)?;
         }
+        return Ok(done);
     }
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let bar = super::progress(count, "synth", log);
@@ -87,23 +83,9 @@ pub(super) fn generate(
     let objects = (0..count)
         .into_par_iter()
         .map(|i| {
-            let s = synthesize(i, seed, categories);
-            let dir = out.join(s.category.name());
-            std::fs::create_dir_all(&dir)
-                .with_context(|| format!("{}: cannot create", dir.display()))?;
-            let path = dir.join(format!("{}.obj", s.name));
-            write_obj(&path, &s.mesh)
-                .with_context(|| format!("{}: cannot write", path.display()))?;
+            let entry = write_object(out, i, seed, categories)?;
             bar.inc(1);
-            Ok(SynthEntry {
-                index: i,
-                name: s.name,
-                category: s.category,
-                variant: s.variant,
-                seed: s.seed,
-                path: path.strip_prefix(out).unwrap_or(&path).to_path_buf(),
-                triangles: s.mesh.triangles.len(),
-            })
+            Ok(entry)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     bar.finish_and_clear();
@@ -126,6 +108,43 @@ pub(super) fn generate(
         write_preview(out, &manifest, log)?;
     }
     Ok(manifest)
+}
+
+/// The manifest at `path` when it records exactly this run: `count` objects of `categories`
+/// drawn with `seed`.
+fn already_generated(
+    path: &Path,
+    count: usize,
+    categories: &[Category],
+    seed: u64,
+) -> Option<SynthManifest> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let done = serde_json::from_str::<SynthManifest>(&text).ok()?;
+    (done.seed == seed && done.categories == categories && done.objects.len() == count)
+        .then_some(done)
+}
+
+/// Synthesizes object `index` of the run and writes it to OUT/CATEGORY/NAME.obj.
+fn write_object(
+    out: &Path,
+    index: usize,
+    seed: u64,
+    categories: &[Category],
+) -> anyhow::Result<SynthEntry> {
+    let s = synthesize(index, seed, categories);
+    let dir = out.join(s.category.name());
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let path = dir.join(format!("{}.obj", s.name));
+    write_obj(&path, &s.mesh).with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(SynthEntry {
+        index,
+        name: s.name,
+        category: s.category,
+        variant: s.variant,
+        seed: s.seed,
+        path: path.strip_prefix(out).unwrap_or(&path).to_path_buf(),
+        triangles: s.mesh.triangles.len(),
+    })
 }
 
 fn write_preview(out: &Path, manifest: &SynthManifest, log: Log) -> anyhow::Result<()> {

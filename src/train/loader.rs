@@ -2,7 +2,9 @@
 //! samples of each step in [`DrawOrder`], renders them on its own thread pool and queues up to
 //! `prefetch` steps ahead.
 
-use super::dataset::{load_sample, AugmentSettings, Cache, DataError, DrawOrder, SampleRef};
+use super::dataset::{
+    load_sample, AugmentSettings, Cache, DataError, DrawOrder, Rendered, SampleRef,
+};
 use crate::core::camera::Camera;
 use crate::model::gan::Batch;
 use crate::model::inpaint::{encode_input, encode_target};
@@ -67,6 +69,27 @@ pub struct LoaderPlan {
     pub workers: usize,
 }
 
+/// One micro-batch's rendered samples encoded into the host buffers the network's tensors are
+/// made from.
+fn host_batch(chunk: &[Rendered], cameras: &[Camera], channels: Channels) -> HostBatch {
+    let mut batch = HostBatch {
+        input: Vec::new(),
+        images: Vec::new(),
+        occupancy: Vec::new(),
+        dims: [
+            chunk.len(),
+            cameras.len(),
+            channels.count(),
+            cameras[0].size,
+        ],
+    };
+    for r in chunk {
+        encode_input(&r.input, channels, &mut batch.input);
+        encode_target(&r.target, channels, &mut batch.images, &mut batch.occupancy);
+    }
+    batch
+}
+
 pub struct Loader {
     rx: Receiver<Result<StepData, DataError>>,
 }
@@ -115,29 +138,7 @@ impl Loader {
                     step,
                     micro: rendered
                         .chunks(plan.batch)
-                        .map(|chunk| {
-                            let mut batch = HostBatch {
-                                input: Vec::new(),
-                                images: Vec::new(),
-                                occupancy: Vec::new(),
-                                dims: [
-                                    chunk.len(),
-                                    cameras.len(),
-                                    plan.channels.count(),
-                                    cameras[0].size,
-                                ],
-                            };
-                            for r in chunk {
-                                encode_input(&r.input, plan.channels, &mut batch.input);
-                                encode_target(
-                                    &r.target,
-                                    plan.channels,
-                                    &mut batch.images,
-                                    &mut batch.occupancy,
-                                );
-                            }
-                            batch
-                        })
+                        .map(|chunk| host_batch(chunk, &cameras, plan.channels))
                         .collect(),
                 });
                 let failed = data.is_err();

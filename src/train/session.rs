@@ -35,6 +35,32 @@ pub(super) struct Session<'a> {
     interval: Interval,
 }
 
+/// Warns when the data's views (`data_size`²) are smaller than the model's (`model_size`²).
+fn warn_if_smaller(data_size: usize, model_size: usize, monitor: &mut dyn Monitor) {
+    if data_size < model_size {
+        monitor.warn(&format!(
+            "the data's views are {data_size}² and the model's {model_size}²: views rendered \
+             larger than they were made leave holes in the ground truth; prepare the data with \
+             --size {model_size}"
+        ));
+    }
+}
+
+/// What the loader makes for `job`, from step `first_step` on.
+fn loader_plan(job: &Job, first_step: u64) -> LoaderPlan {
+    let settings = &job.settings;
+    LoaderPlan {
+        seed: settings.seed,
+        batch: settings.batch,
+        accumulate: settings.accumulate,
+        first_step,
+        augment: settings.augment,
+        channels: job.model.channels,
+        prefetch: job.prefetch,
+        workers: job.workers,
+    }
+}
+
 impl<'a> Session<'a> {
     /// Checks the data, creates (or resumes) the run directory and starts the loader.
     pub(super) fn open(job: &'a Job, monitor: &mut dyn Monitor) -> Result<Session<'a>, TrainError> {
@@ -51,14 +77,7 @@ impl<'a> Session<'a> {
             })?;
         let cache = Arc::new(Cache::new(job.cache_bytes));
         let data_size = cache.get(&train_samples[0].gt, &settings.views)?.size;
-        if data_size < job.model.size {
-            monitor.warn(&format!(
-                "the data's views are {data_size}² and the model's {}²: views rendered larger \
-                 than they were made leave holes in the ground truth; prepare the data with \
-                 --size {}",
-                job.model.size, job.model.size
-            ));
-        }
+        warn_if_smaller(data_size, job.model.size, monitor);
         let val_items = validate::build(
             &validate::pick(&val_samples, settings.val_samples),
             &cameras,
@@ -85,16 +104,7 @@ impl<'a> Session<'a> {
             Arc::new(train_samples),
             cameras,
             cache,
-            LoaderPlan {
-                seed: settings.seed,
-                batch: settings.batch,
-                accumulate: settings.accumulate,
-                first_step: state.step,
-                augment: settings.augment,
-                channels: job.model.channels,
-                prefetch: job.prefetch,
-                workers: job.workers,
-            },
+            loader_plan(job, state.step),
         );
         Ok(Session {
             job,

@@ -13,6 +13,25 @@ use burn::tensor::{s, Device, Tensor};
 /// (sigmoid ≈ 1 − 2e-9).
 const MEASURED_LOGIT: f32 = 20.0;
 
+/// A normalized convolution's spec without dilation.
+fn spec(
+    channels: [usize; 2],
+    kernel: usize,
+    stride: usize,
+    pad: usize,
+    kind: LayerKind,
+) -> ConvSpec {
+    ConvSpec {
+        channels,
+        kernel,
+        stride,
+        dilation: 1,
+        pad,
+        norm: true,
+        kind,
+    }
+}
+
 #[derive(Module, Debug)]
 pub struct Generator {
     stem: ConvNorm,
@@ -41,40 +60,11 @@ pub struct GeneratorOutput {
 impl Generator {
     pub(super) fn new(config: &ModelConfig, device: &Device) -> Generator {
         let w = config.width;
-        let padding = config.padding;
-        let conv = |channels, kernel, stride, pad, kind| ConvSpec {
-            channels,
-            kernel,
-            stride,
-            dilation: 1,
-            pad,
-            norm: true,
-            kind,
-        };
         let early_fusion = config.fusion() == Fusion::Early;
         let planes = config.input_channels();
-        // Early fusion adds w fused planes to each view's input.
-        let stem_in = if early_fusion { planes + w } else { planes };
-        let stem = ConvNorm::new(
-            conv([stem_in, w], 7, 1, 3, LayerKind::Conv7x7),
-            padding,
-            device,
-        );
-        let down = vec![
-            ConvNorm::new(
-                conv([w, 2 * w], 4, 2, 1, LayerKind::ConvDown),
-                padding,
-                device,
-            ),
-            ConvNorm::new(
-                conv([2 * w, 4 * w], 4, 2, 1, LayerKind::ConvDown),
-                padding,
-                device,
-            ),
-        ];
-        let middle = (0..config.res_blocks)
-            .map(|_| ResBlock::new(4 * w, padding, device))
-            .collect();
+        // Parts are made in the order of the layers (stem, down, middle, fusion, up, head):
+        // a seeded fresh network's initial weights follow that order.
+        let (stem, down, middle) = Self::encoder(config, device);
         // The original's fusion convolution zero-pads; the config's padding mode is kept for
         // all same-size convolutions alike so `Padding::Zero` removes every reflection.
         let fusion_channels = if early_fusion {
@@ -83,30 +73,11 @@ impl Generator {
             [config.views * 4 * w, 4 * w]
         };
         let fusion = ConvNorm::new(
-            conv(fusion_channels, 3, 1, 1, LayerKind::Fusion),
+            spec(fusion_channels, 3, 1, 1, LayerKind::Fusion),
             Padding::Zero,
             device,
         );
-        // Late fusion puts the fused features beside each view's own.
-        let decoder_in = if early_fusion { 4 * w } else { 8 * w };
-        let up = vec![
-            UpNorm::new([decoder_in, 2 * w], device),
-            UpNorm::new([2 * w, w], device),
-        ];
-        let head = ConvNorm::new(
-            ConvSpec {
-                norm: false,
-                ..conv(
-                    [w, config.channels.count() + 1],
-                    7,
-                    1,
-                    3,
-                    LayerKind::Conv7x7,
-                )
-            },
-            padding,
-            device,
-        );
+        let (up, head) = Self::decoder(config, device);
         Generator {
             stem,
             down,
@@ -119,6 +90,63 @@ impl Generator {
             early_fusion,
             copy_input: config.copies_input(),
         }
+    }
+
+    /// The per-view encoder: a 7×7 stem, two strided halvings to 4·width channels, and the
+    /// residual blocks.
+    fn encoder(config: &ModelConfig, device: &Device) -> (ConvNorm, Vec<ConvNorm>, Vec<ResBlock>) {
+        let (w, padding) = (config.width, config.padding);
+        let planes = config.input_channels();
+        // Early fusion adds w fused planes to each view's input.
+        let stem_in = if config.fusion() == Fusion::Early {
+            planes + w
+        } else {
+            planes
+        };
+        let stem = ConvNorm::new(
+            spec([stem_in, w], 7, 1, 3, LayerKind::Conv7x7),
+            padding,
+            device,
+        );
+        let down = [[w, 2 * w], [2 * w, 4 * w]]
+            .map(|channels| {
+                ConvNorm::new(
+                    spec(channels, 4, 2, 1, LayerKind::ConvDown),
+                    padding,
+                    device,
+                )
+            })
+            .into();
+        let middle = (0..config.res_blocks)
+            .map(|_| ResBlock::new(4 * w, padding, device))
+            .collect();
+        (stem, down, middle)
+    }
+
+    /// The per-view decoder: two doublings back to width channels and a 7×7 head to the
+    /// output's channels and the occupancy logit.
+    fn decoder(config: &ModelConfig, device: &Device) -> (Vec<UpNorm>, ConvNorm) {
+        let w = config.width;
+        // Late fusion puts the fused features beside each view's own.
+        let decoder_in = if config.fusion() == Fusion::Early {
+            4 * w
+        } else {
+            8 * w
+        };
+        let up = vec![
+            UpNorm::new([decoder_in, 2 * w], device),
+            UpNorm::new([2 * w, w], device),
+        ];
+        let outputs = config.channels.count() + 1;
+        let head = ConvNorm::new(
+            ConvSpec {
+                norm: false,
+                ..spec([w, outputs], 7, 1, 3, LayerKind::Conv7x7)
+            },
+            config.padding,
+            device,
+        );
+        (up, head)
     }
 
     /// # Shapes

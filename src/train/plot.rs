@@ -60,25 +60,8 @@ fn draw_panel(img: &mut RgbImage, ox: i64, oy: i64, panel: &Panel, max_x: f64) {
         oy + PANEL_H as i64 - 30,
     );
     text(img, ox + 70, oy + 8, panel.title, 3, INK);
-    let values: Vec<f64> = panel
-        .series
-        .iter()
-        .flat_map(|s| s.points.iter().map(|p| p.1))
-        .filter(|v| v.is_finite())
-        .collect();
-    let log = panel.log && values.iter().all(|&v| v > 0.0);
+    let (log, lo, hi) = y_range(panel);
     let f = |v: f64| if log { v.log10() } else { v };
-    let (mut lo, mut hi) = values
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(f(v)), b.max(f(v)))
-        });
-    if !lo.is_finite() {
-        (lo, hi) = (0.0, 1.0);
-    }
-    if hi - lo < 1e-12 {
-        (lo, hi) = (lo - 0.5, hi + 0.5);
-    }
     for x in left..=right {
         put(img, x, bottom, AXIS);
     }
@@ -105,22 +88,53 @@ fn draw_panel(img: &mut RgbImage, ox: i64, oy: i64, panel: &Panel, max_x: f64) {
         )
     };
     for s in &panel.series {
-        let pts: Vec<(f64, f64)> = s
-            .points
-            .iter()
-            .copied()
-            .filter(|p| p.1.is_finite())
-            .collect();
-        if pts.len() == 1 {
-            let (x, y) = to_px(pts[0]);
-            for d in -2..=2 {
-                put(img, x as i64 + d, y as i64, s.color);
-                put(img, x as i64, y as i64 + d, s.color);
-            }
+        draw_series(img, s, to_px);
+    }
+}
+
+/// Whether `panel` is drawn on a log scale (asked for, and every value positive), and the
+/// lowest and highest of its finite values on that scale, spread apart when equal.
+fn y_range(panel: &Panel) -> (bool, f64, f64) {
+    let values: Vec<f64> = panel
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1))
+        .filter(|v| v.is_finite())
+        .collect();
+    let log = panel.log && values.iter().all(|&v| v > 0.0);
+    let f = |v: f64| if log { v.log10() } else { v };
+    let (mut lo, mut hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(f(v)), b.max(f(v)))
+        });
+    if !lo.is_finite() {
+        (lo, hi) = (0.0, 1.0);
+    }
+    if hi - lo < 1e-12 {
+        (lo, hi) = (lo - 0.5, hi + 0.5);
+    }
+    (log, lo, hi)
+}
+
+/// A series' finite points joined by lines, with `to_px` placing them; a single point is
+/// drawn as a small cross.
+fn draw_series(img: &mut RgbImage, s: &Series, to_px: impl Fn((f64, f64)) -> (f64, f64)) {
+    let pts: Vec<(f64, f64)> = s
+        .points
+        .iter()
+        .copied()
+        .filter(|p| p.1.is_finite())
+        .collect();
+    if pts.len() == 1 {
+        let (x, y) = to_px(pts[0]);
+        for d in -2..=2 {
+            put(img, x as i64 + d, y as i64, s.color);
+            put(img, x as i64, y as i64 + d, s.color);
         }
-        for w in pts.windows(2) {
-            line(img, to_px(w[0]), to_px(w[1]), s.color);
-        }
+    }
+    for w in pts.windows(2) {
+        line(img, to_px(w[0]), to_px(w[1]), s.color);
     }
 }
 

@@ -192,14 +192,7 @@ pub fn train_orienter(
     let mut optim = AdamConfig::new().init();
     let n = config.points;
     let mut best: Option<(OrienterNet, OrientScores)> = None;
-    let score = |net: &OrienterNet| {
-        let orienter = Orienter::new(net.valid(), config.clone(), device.clone());
-        let mut errors: Vec<f64> = val_set
-            .iter()
-            .map(|(points, heading)| angle_between(orienter.heading(points), *heading))
-            .collect();
-        OrientScores::of(&mut errors)
-    };
+    let score = |net: &OrienterNet| scores_on(net, config, device, &val_set);
     let mut draw = Lcg::new(derive_seed(settings.seed, "orient draws"));
     for step in 1..=settings.steps {
         let (inputs, targets) = draw_batch(train, settings, n, &mut draw, &load)?;
@@ -209,13 +202,7 @@ pub fn train_orienter(
         // [batch, 4]
         let y = Tensor::<2>::from_data(TensorData::new(targets, [b, 4]), &autodiff);
         let loss = (net.forward(x) - y).powi_scalar(2).mean();
-        let value = loss
-            .clone()
-            .into_data()
-            .try_into_vec::<f32>()
-            .ok()
-            .and_then(|v| v.first().copied())
-            .unwrap_or(f32::NAN);
+        let value = first_value(loss.clone());
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(settings.learning_rate, net, grads);
 
@@ -245,6 +232,30 @@ pub fn train_orienter(
         Orienter::new(net.valid(), config.clone(), device.clone()),
         scores,
     ))
+}
+
+/// The heading errors of `net` (degrees) over the validation partials `val_set`.
+fn scores_on(
+    net: &OrienterNet,
+    config: &OrienterConfig,
+    device: &Device,
+    val_set: &[Turned],
+) -> OrientScores {
+    let orienter = Orienter::new(net.valid(), config.clone(), device.clone());
+    let mut errors: Vec<f64> = val_set
+        .iter()
+        .map(|(points, heading)| angle_between(orienter.heading(points), *heading))
+        .collect();
+    OrientScores::of(&mut errors)
+}
+
+/// A loss tensor's value, NaN when it cannot be read.
+fn first_value(loss: Tensor<1>) -> f32 {
+    loss.into_data()
+        .try_into_vec::<f32>()
+        .ok()
+        .and_then(|v| v.first().copied())
+        .unwrap_or(f32::NAN)
 }
 
 /// Partials with fewer points say nothing about a heading.

@@ -13,6 +13,8 @@ use crate::datagen::scan::{PartialParams, PartialSpec};
 use crate::io::batch::{walk, BatchError};
 use crate::metrics::{farthest_point_sample, COARSE_POINTS};
 use serde::{Deserialize, Serialize};
+use std::collections::hash_map::Entry;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 pub const TRAIN: &str = "train";
@@ -102,55 +104,67 @@ pub fn discover(dir: &Path) -> Result<(Vec<Source>, Vec<Skipped>), BatchError> {
         .unwrap_or_else(|| "objects".to_string());
     let mut sources: Vec<Source> = Vec::new();
     let mut skipped = Vec::new();
+    // Each (category, name) pair and the source that took it first.
+    let mut taken: HashMap<(String, String), usize> = HashMap::new();
     for path in files {
-        let rel: Vec<String> = path
-            .strip_prefix(dir)
-            .unwrap_or(&path)
-            .components()
-            .map(|c| c.as_os_str().to_string_lossy().into_owned())
-            .collect();
-        let stem = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        // Index (in `rel`) of the component that names the model.
-        let mut name_at = rel.len() - 1;
-        if GENERIC_STEMS.contains(&stem.as_str()) && name_at > 0 {
-            name_at -= 1;
-            if rel[name_at] == "models" && name_at > 0 {
-                name_at -= 1;
+        let (category, name) = category_and_name(dir, &path, &root_name);
+        match taken.entry((category, name)) {
+            Entry::Occupied(first) => {
+                let (category, name) = first.key();
+                skipped.push(Skipped {
+                    problem: format!(
+                        "same category and name ({category}/{name}) as {}",
+                        sources[*first.get()].path.display()
+                    ),
+                    path,
+                });
+            }
+            Entry::Vacant(slot) => {
+                let (category, name) = slot.key().clone();
+                slot.insert(sources.len());
+                sources.push(Source {
+                    path,
+                    category,
+                    name,
+                });
             }
         }
-        let name = if name_at == rel.len() - 1 {
-            stem
-        } else {
-            rel[name_at].clone()
-        };
-        let category = if name_at > 0 {
-            rel[0].clone()
-        } else {
-            root_name.clone()
-        };
-        if let Some(first) = sources
-            .iter()
-            .find(|s| s.category == category && s.name == name)
-        {
-            skipped.push(Skipped {
-                path: path.clone(),
-                problem: format!(
-                    "same category and name ({category}/{name}) as {}",
-                    first.path.display()
-                ),
-            });
-            continue;
-        }
-        sources.push(Source {
-            path,
-            category,
-            name,
-        });
     }
     Ok((sources, skipped))
+}
+
+/// The category and name of the mesh at `path` under `dir` (see [`discover`]); `root_name`
+/// is the category of meshes lying directly in `dir`.
+fn category_and_name(dir: &Path, path: &Path, root_name: &str) -> (String, String) {
+    let rel: Vec<String> = path
+        .strip_prefix(dir)
+        .unwrap_or(path)
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    // Index (in `rel`) of the component that names the model.
+    let mut name_at = rel.len() - 1;
+    if GENERIC_STEMS.contains(&stem.as_str()) && name_at > 0 {
+        name_at -= 1;
+        if rel[name_at] == "models" && name_at > 0 {
+            name_at -= 1;
+        }
+    }
+    let name = if name_at == rel.len() - 1 {
+        stem
+    } else {
+        rel[name_at].clone()
+    };
+    let category = if name_at > 0 {
+        rel[0].clone()
+    } else {
+        root_name.to_string()
+    };
+    (category, name)
 }
 
 /// The split of a model: a hash of its category and name, so it does not depend on the seed,

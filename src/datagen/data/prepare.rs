@@ -110,11 +110,7 @@ pub fn prepare_model(
 
     let clouds_dir = layout.clouds(split, &source.category, &source.name);
     create_dir(&clouds_dir)?;
-    let keep_partials = match params.clouds {
-        CloudPolicy::All => true,
-        CloudPolicy::Test => split == TEST,
-        CloudPolicy::Gt => false,
-    };
+    let keep_partials = keeps_partials(params.clouds, split);
     let samples = (1..=params.samples)
         .into_par_iter()
         .map(|k| {
@@ -143,15 +139,30 @@ pub fn prepare_model(
         gt_points,
         samples,
     };
+    write_done(&clouds_dir, &entry)?;
+    Ok(entry)
+}
+
+/// Whether `policy` writes the partial clouds of a model in `split`.
+fn keeps_partials(policy: CloudPolicy, split: &str) -> bool {
+    match policy {
+        CloudPolicy::All => true,
+        CloudPolicy::Test => split == TEST,
+        CloudPolicy::Gt => false,
+    }
+}
+
+/// The done marker, written last: a model whose folder has it is finished (a resumed run
+/// skips it).
+fn write_done(clouds_dir: &Path, entry: &ModelEntry) -> Result<(), PrepareError> {
     let marker = clouds_dir.join(DONE_FILE);
     atomic_write(&marker, |w| {
-        serde_json::to_writer_pretty(&mut *w, &entry).map_err(std::io::Error::other)
+        serde_json::to_writer_pretty(&mut *w, entry).map_err(std::io::Error::other)
     })
     .map_err(|source| PrepareError::Write {
-        path: marker.clone(),
+        path: marker,
         source,
-    })?;
-    Ok(entry)
+    })
 }
 
 /// The mesh at `path`, checked and turned into the normalized pose `params` asks for; its

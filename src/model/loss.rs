@@ -240,27 +240,8 @@ pub fn generator_losses(
     let occupancy = bce_with_logits(output.occupancy.clone(), target.occupancy.clone());
 
     let zero = || l1.zeros_like();
-    let probability = burn::tensor::activation::sigmoid(output.occupancy.clone());
-    let fake = weights.needs_discriminator(vgg.is_some()).then(|| {
-        discriminator.forward(discriminator_input(
-            output.images.clone(),
-            probability.clone(),
-        ))
-    });
-    let adversarial = match &fake {
-        Some(fake) if weights.adversarial != 0.0 => {
-            generator_adversarial(weights.adversarial_kind, fake.logits.clone())
-        }
-        _ => zero(),
-    };
-    let (perceptual, style) = match (weights.compares_features(), vgg, &fake) {
-        (true, Some(vgg), _) => vgg_losses(vgg, output, probability, target),
-        (true, None, Some(fake)) => (
-            self::perceptual(&fake.features, real_features),
-            self::style(&fake.features, real_features),
-        ),
-        _ => (zero(), zero()),
-    };
+    let [adversarial, perceptual, style] =
+        critics_losses(output, target, discriminator, real_features, vgg, weights);
 
     let geometry = output
         .images
@@ -290,6 +271,41 @@ pub fn generator_losses(
         depth,
         total,
     }
+}
+
+/// The adversarial, perceptual and style terms of [`generator_losses`], zero where their
+/// weights are; the discriminator runs only when one of them needs it.
+fn critics_losses(
+    output: &GeneratorOutput,
+    target: &Target,
+    discriminator: &Discriminator,
+    real_features: &[Tensor<4>],
+    vgg: Option<&Vgg19>,
+    weights: &LossWeights,
+) -> [Tensor<1>; 3] {
+    let zero = || Tensor::<1>::zeros([1], &output.images.device());
+    let probability = burn::tensor::activation::sigmoid(output.occupancy.clone());
+    let fake = weights.needs_discriminator(vgg.is_some()).then(|| {
+        discriminator.forward(discriminator_input(
+            output.images.clone(),
+            probability.clone(),
+        ))
+    });
+    let adversarial = match &fake {
+        Some(fake) if weights.adversarial != 0.0 => {
+            generator_adversarial(weights.adversarial_kind, fake.logits.clone())
+        }
+        _ => zero(),
+    };
+    let (perceptual, style) = match (weights.compares_features(), vgg, &fake) {
+        (true, Some(vgg), _) => vgg_losses(vgg, output, probability, target),
+        (true, None, Some(fake)) => (
+            self::perceptual(&fake.features, real_features),
+            self::style(&fake.features, real_features),
+        ),
+        _ => (zero(), zero()),
+    };
+    [adversarial, perceptual, style]
 }
 
 /// The perceptual and style terms on VGG19's features of the masked views, the real views'

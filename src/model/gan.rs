@@ -2,7 +2,9 @@
 //! discriminator on real views against detached generated ones, then the generator on the
 //! weighted sum of its losses. The real views pass through the discriminator once per step.
 
-use super::loss::{discriminator_input, discriminator_loss, generator_losses, LossWeights, Target};
+use super::loss::{
+    discriminator_input, discriminator_loss, generator_losses, GeneratorLosses, LossWeights, Target,
+};
 use super::vgg::Vgg19;
 use super::{ConfigError, Discriminator, Generator, GeneratorOutput, ModelConfig};
 use burn::config::Config;
@@ -226,17 +228,7 @@ impl Gan {
                 ),
             );
             clock.done(StepPhase::GeneratorBackward);
-            sum = sum.plus(&StepLosses {
-                discriminator: d_loss,
-                generator: value(g.total),
-                l1: value(g.l1),
-                adversarial: value(g.adversarial),
-                perceptual: value(g.perceptual),
-                style: value(g.style),
-                occupancy: value(g.occupancy),
-                tv: value(g.tv),
-                depth: value(g.depth),
-            });
+            sum = sum.plus(&StepLosses::read(d_loss, g));
         }
         if game {
             self.discriminator = self.d_optim.step(
@@ -332,13 +324,31 @@ fn adam_config(optim: &GanOptimConfig) -> AdamConfig {
 }
 
 /// A one-element loss read back as a number; NaN if the backend cannot give one.
-fn value(t: Tensor<1>) -> f32 {
+/// A scalar loss's value, NaN when it cannot be read.
+pub(crate) fn value(t: Tensor<1>) -> f32 {
     t.into_data()
         .try_into_vec::<f32>()
-        .map_or(f32::NAN, |v| v[0])
+        .ok()
+        .and_then(|v| v.first().copied())
+        .unwrap_or(f32::NAN)
 }
 
 impl StepLosses {
+    /// The discriminator's loss `discriminator` and the generator's terms, read back.
+    fn read(discriminator: f32, g: GeneratorLosses) -> StepLosses {
+        StepLosses {
+            discriminator,
+            generator: value(g.total),
+            l1: value(g.l1),
+            adversarial: value(g.adversarial),
+            perceptual: value(g.perceptual),
+            style: value(g.style),
+            occupancy: value(g.occupancy),
+            tv: value(g.tv),
+            depth: value(g.depth),
+        }
+    }
+
     pub fn plus(mut self, o: &StepLosses) -> StepLosses {
         for (a, b) in self.terms_mut().into_iter().zip(o.terms()) {
             *a += b.1;

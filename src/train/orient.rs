@@ -5,6 +5,7 @@
 use crate::complete::orient::net::{sample_points, target, Orienter, OrienterConfig, OrienterNet};
 use crate::complete::orient::{angle_between, heading_of_turn};
 use crate::core::rng::{derive_seed, Lcg};
+use crate::model::gan::value;
 use crate::train::dataset::{hold_back, scan_split, Cache, DataError, SampleRef};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
@@ -202,7 +203,7 @@ pub fn train_orienter(
         // [batch, 4]
         let y = Tensor::<2>::from_data(TensorData::new(targets, [b, 4]), &autodiff);
         let loss = (net.forward(x) - y).powi_scalar(2).mean();
-        let value = first_value(loss.clone());
+        let value = value(loss.clone());
         let grads = GradientsParams::from_grads(loss.backward(), &net);
         net = optim.step(settings.learning_rate, net, grads);
 
@@ -247,15 +248,6 @@ fn scores_on(
         .map(|(points, heading)| angle_between(orienter.heading(points), *heading))
         .collect();
     OrientScores::of(&mut errors)
-}
-
-/// A loss tensor's value, NaN when it cannot be read.
-fn first_value(loss: Tensor<1>) -> f32 {
-    loss.into_data()
-        .try_into_vec::<f32>()
-        .ok()
-        .and_then(|v| v.first().copied())
-        .unwrap_or(f32::NAN)
 }
 
 /// Partials with fewer points say nothing about a heading.

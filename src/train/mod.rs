@@ -442,32 +442,15 @@ impl RunLog {
         Ok(())
     }
 
+    /// The run's curves (`losses.png`): three training losses and three validation scores,
+    /// the last beside the partial inputs' own.
     fn draw(&self, run: &Path) -> Result<(), TrainError> {
-        let mut train: [Vec<(f64, f64)>; 3] = Default::default();
-        let mut val: [Vec<(f64, f64)>; 3] = Default::default();
-        let mut base: [Option<f64>; 3] = [None; 3];
-        let mut max_x: f64 = 1.0;
-        for r in &self.records {
-            match r {
-                LogRecord::Train { step, losses, .. } => {
-                    let x = *step as f64;
-                    max_x = max_x.max(x);
-                    train[0].push((x, losses.generator as f64));
-                    train[1].push((x, losses.discriminator as f64));
-                    train[2].push((x, losses.l1 as f64));
-                }
-                LogRecord::Validation { step, scores, .. } => {
-                    let x = *step as f64;
-                    max_x = max_x.max(x);
-                    val[0].push((x, scores.cd.unwrap_or(f64::NAN)));
-                    val[1].push((x, scores.f1));
-                    val[2].push((x, scores.geometry.psnr));
-                }
-                LogRecord::Baseline { scores } => {
-                    base = [scores.cd, Some(scores.f1), Some(scores.geometry.psnr)];
-                }
-            }
-        }
+        let Curves {
+            train,
+            val,
+            base,
+            max_x,
+        } = Curves::of(&self.records);
         let baselines: Vec<[(f64, f64); 2]> = base
             .iter()
             .map(|b| {
@@ -505,6 +488,49 @@ impl RunLog {
         }
         let img = plot::panels(&panels, max_x);
         save_png(&run.join(LOSSES_PNG), &img)
+    }
+}
+
+/// What a run's log holds for its plot: the generator's loss, the discriminator's and L1 per
+/// step, the validation CD, F1 and PSNR per validation, the partial inputs' three scores, and
+/// the last step.
+struct Curves {
+    train: [Vec<(f64, f64)>; 3],
+    val: [Vec<(f64, f64)>; 3],
+    base: [Option<f64>; 3],
+    max_x: f64,
+}
+
+impl Curves {
+    fn of(records: &[LogRecord]) -> Curves {
+        let mut c = Curves {
+            train: Default::default(),
+            val: Default::default(),
+            base: [None; 3],
+            max_x: 1.0,
+        };
+        for r in records {
+            match r {
+                LogRecord::Train { step, losses, .. } => {
+                    let x = *step as f64;
+                    c.max_x = c.max_x.max(x);
+                    c.train[0].push((x, losses.generator as f64));
+                    c.train[1].push((x, losses.discriminator as f64));
+                    c.train[2].push((x, losses.l1 as f64));
+                }
+                LogRecord::Validation { step, scores, .. } => {
+                    let x = *step as f64;
+                    c.max_x = c.max_x.max(x);
+                    c.val[0].push((x, scores.cd.unwrap_or(f64::NAN)));
+                    c.val[1].push((x, scores.f1));
+                    c.val[2].push((x, scores.geometry.psnr));
+                }
+                LogRecord::Baseline { scores } => {
+                    c.base = [scores.cd, Some(scores.f1), Some(scores.geometry.psnr)];
+                }
+            }
+        }
+        c
     }
 }
 

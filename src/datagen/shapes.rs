@@ -52,77 +52,125 @@ pub fn car(n: usize, seed: u64) -> Sampled {
         2.0 * std::f64::consts::PI * radius * width + std::f64::consts::PI * radius * radius;
     let total = boxes.iter().map(box_area).sum::<f64>() + 4.0 * wheel_area;
 
-    let mut positions = Vec::with_capacity(n);
-    let mut colors = Vec::with_capacity(n);
-    let mut normals = Vec::with_capacity(n);
+    let mut out = Surface::with_capacity(n);
     for b in &boxes {
         let count = (n as f64 * box_area(b) / total).round() as usize;
-        let e = [0, 1, 2].map(|i| b.max[i] - b.min[i]);
-        let faces = [
-            e[1] * e[2],
-            e[1] * e[2],
-            e[0] * e[2],
-            e[0] * e[2],
-            e[0] * e[1],
-            e[0] * e[1],
-        ];
-        let face_total: f64 = faces.iter().sum();
-        for _ in 0..count {
-            let mut pick = rng.next_f64() * face_total;
-            let mut face = 0;
-            while face < 5 && pick >= faces[face] {
-                pick -= faces[face];
-                face += 1;
-            }
-            let axis = face / 2;
-            let mut p = [0, 1, 2].map(|i| rng.range(b.min[i], b.max[i]));
-            let mut normal = [0.0; 3];
-            if face % 2 == 0 {
-                p[axis] = b.min[axis];
-                normal[axis] = -1.0;
-            } else {
-                p[axis] = b.max[axis];
-                normal[axis] = 1.0;
-            }
-            positions.push(p);
-            colors.push(b.color);
-            normals.push(normal);
-        }
+        sample_box(b, count, &mut rng, &mut out);
     }
     let per_wheel = (n as f64 * wheel_area / total).round() as usize;
     for &(cz, cx) in &wheels {
-        let outward: f64 = if cx < 0.0 { -1.0 } else { 1.0 };
-        let side_share = std::f64::consts::PI * radius * radius / wheel_area;
-        for _ in 0..per_wheel {
-            let angle = rng.range(0.0, std::f64::consts::TAU);
-            if rng.next_f64() < side_share {
-                let r = radius * rng.next_f64().sqrt();
-                positions.push([
-                    cx + outward * width / 2.0,
-                    radius + r * angle.sin(),
-                    cz + r * angle.cos(),
-                ]);
-                colors.push(if r < 0.6 * radius {
-                    [170, 170, 175]
-                } else {
-                    [25, 25, 25]
-                });
-                normals.push([outward, 0.0, 0.0]);
-            } else {
-                let x = cx + rng.range(-width / 2.0, width / 2.0);
-                positions.push([x, radius + radius * angle.sin(), cz + radius * angle.cos()]);
-                colors.push([25, 25, 25]);
-                normals.push([0.0, angle.sin(), angle.cos()]);
-            }
-        }
+        let wheel = Wheel {
+            centre: [cx, radius, cz],
+            radius,
+            width,
+        };
+        sample_wheel(&wheel, per_wheel, &mut rng, &mut out);
     }
     Sampled {
         cloud: PointCloud {
-            positions,
-            colors: Some(colors),
+            positions: out.positions,
+            colors: Some(out.colors),
             ..Default::default()
         },
-        normals,
+        normals: out.normals,
+    }
+}
+
+/// Surface samples as they are drawn: positions, colours and outward normals.
+struct Surface {
+    positions: Vec<[f64; 3]>,
+    colors: Vec<[u8; 3]>,
+    normals: Vec<[f64; 3]>,
+}
+
+impl Surface {
+    fn with_capacity(n: usize) -> Surface {
+        Surface {
+            positions: Vec::with_capacity(n),
+            colors: Vec::with_capacity(n),
+            normals: Vec::with_capacity(n),
+        }
+    }
+
+    fn push(&mut self, position: [f64; 3], color: [u8; 3], normal: [f64; 3]) {
+        self.positions.push(position);
+        self.colors.push(color);
+        self.normals.push(normal);
+    }
+}
+
+/// `count` points on the faces of box `b`, each face drawn by its area.
+fn sample_box(b: &Part, count: usize, rng: &mut Lcg, out: &mut Surface) {
+    let e = [0, 1, 2].map(|i| b.max[i] - b.min[i]);
+    let faces = [
+        e[1] * e[2],
+        e[1] * e[2],
+        e[0] * e[2],
+        e[0] * e[2],
+        e[0] * e[1],
+        e[0] * e[1],
+    ];
+    let face_total: f64 = faces.iter().sum();
+    for _ in 0..count {
+        let mut pick = rng.next_f64() * face_total;
+        let mut face = 0;
+        while face < 5 && pick >= faces[face] {
+            pick -= faces[face];
+            face += 1;
+        }
+        let axis = face / 2;
+        let mut p = [0, 1, 2].map(|i| rng.range(b.min[i], b.max[i]));
+        let mut normal = [0.0; 3];
+        if face % 2 == 0 {
+            p[axis] = b.min[axis];
+            normal[axis] = -1.0;
+        } else {
+            p[axis] = b.max[axis];
+            normal[axis] = 1.0;
+        }
+        out.push(p, b.color, normal);
+    }
+}
+
+/// A wheel standing on the ground with its axle along x: `centre` is the axle's middle.
+struct Wheel {
+    centre: [f64; 3],
+    radius: f64,
+    width: f64,
+}
+
+/// `count` points on a wheel: its outer side (a grey rim inside the black tyre) and its tread,
+/// each drawn by its area; the inner side is hidden.
+fn sample_wheel(wheel: &Wheel, count: usize, rng: &mut Lcg, out: &mut Surface) {
+    let Wheel {
+        centre: [cx, cy, cz],
+        radius,
+        width,
+    } = *wheel;
+    let outward: f64 = if cx < 0.0 { -1.0 } else { 1.0 };
+    let wheel_area =
+        2.0 * std::f64::consts::PI * radius * width + std::f64::consts::PI * radius * radius;
+    let side_share = std::f64::consts::PI * radius * radius / wheel_area;
+    for _ in 0..count {
+        let angle = rng.range(0.0, std::f64::consts::TAU);
+        if rng.next_f64() < side_share {
+            let r = radius * rng.next_f64().sqrt();
+            let color = if r < 0.6 * radius {
+                [170, 170, 175]
+            } else {
+                [25, 25, 25]
+            };
+            let side = [
+                cx + outward * width / 2.0,
+                cy + r * angle.sin(),
+                cz + r * angle.cos(),
+            ];
+            out.push(side, color, [outward, 0.0, 0.0]);
+        } else {
+            let x = cx + rng.range(-width / 2.0, width / 2.0);
+            let tread = [x, cy + radius * angle.sin(), cz + radius * angle.cos()];
+            out.push(tread, [25, 25, 25], [0.0, angle.sin(), angle.cos()]);
+        }
     }
 }
 

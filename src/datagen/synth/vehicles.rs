@@ -716,6 +716,42 @@ pub fn truck(rng: &mut Lcg) -> (Builder, String) {
     let cz1 = z0 + total;
     let chassis = b.material("chassis", [30, 30, 30]);
     b.cuboid([-0.5, 0.55, z0 + cab_len - 0.2], [0.5, 1.0, cz1], chassis);
+    let kind = truck_cargo(&mut b, rng, (cz0, cz1, cargo_len), chassis);
+    let axles = 1 + rng.below(2);
+    for z in std::iter::once(front_axle).chain((0..axles).map(|i| cz1 - 1.0 - 1.35 * i as f32)) {
+        for side in [-1.0, 1.0] {
+            wheel(
+                &mut b,
+                [side * (width / 2.0 - 0.2), wheel_r, z],
+                wheel_r,
+                0.32,
+                rim_m,
+            );
+        }
+    }
+    let lights = b.material("headlight", [236, 236, 222]);
+    for side in [-1.0f32, 1.0] {
+        let x = (side * 0.8, side * 1.15);
+        end_panel(
+            &mut b,
+            z0,
+            -1.0,
+            (x.0.min(x.1), x.0.max(x.1)),
+            (0.8, 1.0),
+            lights,
+        );
+    }
+    (b, kind.to_string())
+}
+
+/// A truck's load behind its cab, from `cz0` to `cz1` (`cargo_len` long, as drawn) over the
+/// `chassis`: a box, a flatbed with one to three crates, or a tank; returns which.
+fn truck_cargo(
+    b: &mut Builder,
+    rng: &mut Lcg,
+    (cz0, cz1, cargo_len): (f32, f32, f32),
+    chassis: u32,
+) -> &'static str {
     let kind = *rng.pick(&["box", "flatbed", "tank"]);
     let cargo_paint = if rng.chance(0.6) {
         jitter(rng, [235, 235, 232], 8.0)
@@ -756,31 +792,7 @@ pub fn truck(rng: &mut Lcg) -> (Builder, String) {
             b.cuboid([-0.9, 1.0, cz0 + 0.2], [0.9, 1.15, cz1 - 0.2], chassis);
         }
     }
-    let axles = 1 + rng.below(2);
-    for z in std::iter::once(front_axle).chain((0..axles).map(|i| cz1 - 1.0 - 1.35 * i as f32)) {
-        for side in [-1.0, 1.0] {
-            wheel(
-                &mut b,
-                [side * (width / 2.0 - 0.2), wheel_r, z],
-                wheel_r,
-                0.32,
-                rim_m,
-            );
-        }
-    }
-    let lights = b.material("headlight", [236, 236, 222]);
-    for side in [-1.0f32, 1.0] {
-        let x = (side * 0.8, side * 1.15);
-        end_panel(
-            &mut b,
-            z0,
-            -1.0,
-            (x.0.min(x.1), x.0.max(x.1)),
-            (0.8, 1.0),
-            lights,
-        );
-    }
-    (b, kind.to_string())
+    kind
 }
 
 /// Two bogies of four wheels under a rail car starting at `z0`.
@@ -865,74 +877,122 @@ pub fn train(rng: &mut Lcg) -> (Builder, String) {
     let under = b.material("underbody", [34, 34, 36]);
     let bogie = b.material("bogie", [44, 44, 46]);
     let rim_m = b.material("rim", [120, 120, 124]);
-    let floor = if tram { 0.35 } else { 0.95 };
+    let shape = RailCar {
+        tram,
+        width,
+        height,
+        length: car_len,
+        floor: if tram { 0.35 } else { 0.95 },
+    };
+    let materials = RailMaterials {
+        paint: paint_m,
+        stripe,
+        glass: glass_m,
+        door: door_m,
+        under,
+        bogie,
+        rim: rim_m,
+    };
     let mut z0 = -total / 2.0;
     for i in 0..cars {
         let z1 = z0 + car_len;
-        let nose_front = i == 0;
-        let nose_back = i == cars - 1;
-        let nose = if tram { 1.0 } else { 2.2 };
-        let mut top = vec![];
-        if nose_front {
-            top.extend([(z0, height * 0.55), (z0 + nose, height)]);
-        } else {
-            top.push((z0, height));
-        }
-        if nose_back {
-            top.extend([(z1 - nose, height), (z1, height * 0.55)]);
-        } else {
-            top.push((z1, height));
-        }
-        let profile = Profile {
-            z0,
-            z1,
-            width,
-            top,
-            belt: floor + 0.9,
-            clearance: floor,
-            arches: vec![],
-            roof_width: 0.78,
-            end_rounding: 0.4,
-        };
-        let openings = Openings {
-            pitch: 2.0,
-            doors: [0.22f32, 0.5, 0.78]
-                .iter()
-                .map(|f| (car_len * f - 0.65, car_len * f + 0.65))
-                .collect(),
-            both_sides: true,
-            glass: glass_m,
-            door: door_m,
-            other: paint_m,
-        };
-        body(&mut b, &profile, paint_m, |z, band, side| {
-            let local = z - z0;
-            if band == Band::Underside {
-                return under;
-            }
-            let in_nose = (nose_front && local < nose) || (nose_back && z > z1 - nose);
-            if in_nose && !matches!(band, Band::Flank | Band::LowerCorner) {
-                return glass_m;
-            }
-            if band == Band::Shoulder {
-                return stripe;
-            }
-            openings.material(local, band, side)
-        });
-        bogies(&mut b, (z0, car_len), floor, (bogie, rim_m));
+        rail_car(&mut b, &shape, &materials, z0, (i == 0, i == cars - 1));
         if i == 0 {
             pantograph(&mut b, z0 + car_len * 0.35, height);
         }
         z0 = z1 + gap;
         if i + 1 < cars {
             b.cuboid(
-                [-1.0, floor + 0.1, z1 - 0.05],
+                [-1.0, shape.floor + 0.1, z1 - 0.05],
                 [1.0, height - 0.3, z1 + gap + 0.05],
                 under,
             );
         }
     }
     (b, if tram { "tram" } else { "train" }.to_string())
+}
+
+/// The shape shared by a train's cars.
+struct RailCar {
+    tram: bool,
+    width: f32,
+    height: f32,
+    length: f32,
+    /// The floor's height, where the body starts above the bogies.
+    floor: f32,
+}
+
+/// A train's materials.
+struct RailMaterials {
+    paint: u32,
+    stripe: u32,
+    glass: u32,
+    door: u32,
+    under: u32,
+    bogie: u32,
+    rim: u32,
+}
+
+/// One car of a train from `z0` on: its body (with a glazed nose at the front and at the back
+/// where asked), doors and windows on both sides, and its bogies.
+fn rail_car(
+    b: &mut Builder,
+    car: &RailCar,
+    m: &RailMaterials,
+    z0: f32,
+    (nose_front, nose_back): (bool, bool),
+) {
+    let z1 = z0 + car.length;
+    let (height, floor) = (car.height, car.floor);
+    let nose = if car.tram { 1.0 } else { 2.2 };
+    let mut top = vec![];
+    if nose_front {
+        top.extend([(z0, height * 0.55), (z0 + nose, height)]);
+    } else {
+        top.push((z0, height));
+    }
+    if nose_back {
+        top.extend([(z1 - nose, height), (z1, height * 0.55)]);
+    } else {
+        top.push((z1, height));
+    }
+    let profile = Profile {
+        z0,
+        z1,
+        width: car.width,
+        top,
+        belt: floor + 0.9,
+        clearance: floor,
+        arches: vec![],
+        roof_width: 0.78,
+        end_rounding: 0.4,
+    };
+    let openings = Openings {
+        pitch: 2.0,
+        doors: [0.22f32, 0.5, 0.78]
+            .iter()
+            .map(|f| (car.length * f - 0.65, car.length * f + 0.65))
+            .collect(),
+        both_sides: true,
+        glass: m.glass,
+        door: m.door,
+        other: m.paint,
+    };
+    body(b, &profile, m.paint, |z, band, side| {
+        let local = z - z0;
+        if band == Band::Underside {
+            return m.under;
+        }
+        let in_nose = (nose_front && local < nose) || (nose_back && z > z1 - nose);
+        if in_nose && !matches!(band, Band::Flank | Band::LowerCorner) {
+            return m.glass;
+        }
+        if band == Band::Shoulder {
+            return m.stripe;
+        }
+        openings.material(local, band, side)
+    });
+    bogies(b, (z0, car.length), floor, (m.bogie, m.rim));
 }
 
 pub fn motorcycle(rng: &mut Lcg) -> (Builder, String) {

@@ -517,6 +517,44 @@ struct BusMaterials {
     rim: u32,
 }
 
+/// Up to three doors of a bus section from `z0`, `len` long, evenly spread and left out
+/// where they would meet a wheel at `axles`; as (start, end) from the section's start.
+fn bus_doors(z0: f32, len: f32, axles: &[f32]) -> Vec<(f32, f32)> {
+    (0..3)
+        .map(|d| {
+            let c = z0 + 0.9 + d as f32 * (len - 1.8) / 2.0;
+            (c - 0.6, c + 0.6)
+        })
+        .filter(|&(a, bb)| {
+            axles
+                .iter()
+                .all(|&w| (w - a).abs() > 0.7 && (w - bb).abs() > 0.7)
+        })
+        .map(|(a, bb)| (a - z0, bb - z0))
+        .collect()
+}
+
+/// A bus's front from `z0`, `height` high: the windscreen, the destination sign above it and
+/// the roof unit behind.
+fn bus_front(b: &mut Builder, z0: f32, height: f32, glass: u32) {
+    end_panel(b, z0, -1.0, (-1.1, 1.1), (1.0, height - 0.35), glass);
+    let sign = b.material("sign", [250, 170, 30]);
+    end_panel(
+        b,
+        z0 - 0.01,
+        -1.0,
+        (-0.9, 0.9),
+        (height - 0.3, height - 0.12),
+        sign,
+    );
+    let roof_box = b.material("roof_unit", [200, 200, 198]);
+    b.cuboid(
+        [-0.8, height, z0 + 2.0],
+        [0.8, height + 0.28, z0 + 4.2],
+        roof_box,
+    );
+}
+
 /// One section of a bus from `z0` to `z1`: body with windows and doors, wheels, and on the
 /// `first` section the windscreen, destination sign and roof unit.
 fn bus_section(
@@ -553,20 +591,9 @@ fn bus_section(
         roof_width: 0.97,
         end_rounding: 0.25,
     };
-    let doors: Vec<(f32, f32)> = (0..3)
-        .map(|d| {
-            let c = z0 + 0.9 + d as f32 * (len - 1.8) / 2.0;
-            (c - 0.6, c + 0.6)
-        })
-        .filter(|&(a, bb)| {
-            axles
-                .iter()
-                .all(|&w| (w - a).abs() > 0.7 && (w - bb).abs() > 0.7)
-        })
-        .collect();
     let openings = Openings {
         pitch: 1.3,
-        doors: doors.iter().map(|&(a, bb)| (a - z0, bb - z0)).collect(),
+        doors: bus_doors(z0, len, &axles),
         both_sides: false,
         glass: glass_m,
         door: door_m,
@@ -588,22 +615,7 @@ fn bus_section(
         }
     }
     if first {
-        end_panel(b, z0, -1.0, (-1.1, 1.1), (1.0, height - 0.35), glass_m);
-        let sign = b.material("sign", [250, 170, 30]);
-        end_panel(
-            b,
-            z0 - 0.01,
-            -1.0,
-            (-0.9, 0.9),
-            (height - 0.3, height - 0.12),
-            sign,
-        );
-        let roof_box = b.material("roof_unit", [200, 200, 198]);
-        b.cuboid(
-            [-0.8, height, z0 + 2.0],
-            [0.8, height + 0.28, z0 + 4.2],
-            roof_box,
-        );
+        bus_front(b, z0, height, glass_m);
     }
     let lights = b.material("headlight", [236, 236, 222]);
     for side in [-1.0f32, 1.0] {
@@ -1054,50 +1066,56 @@ pub fn motorcycle(rng: &mut Lcg) -> (Builder, String) {
     b.cuboid([-0.06, 0.82, zr - 0.16], [0.06, 0.88, zr - 0.1], tail);
     let rider = rng.chance(0.5);
     if rider {
-        let jacket = b.material(
-            "jacket",
-            pick_color(
-                rng,
-                &[[30, 30, 34], [60, 60, 70], [120, 30, 30], [40, 60, 100]],
-                10.0,
-            ),
-        );
-        let pants = b.material("pants", [40, 44, 60]);
-        let helmet = b.material(
-            "helmet",
-            pick_color(rng, &[[20, 20, 20], [230, 230, 230], [180, 20, 20]], 8.0),
-        );
-        let hip = [0.0, 0.98, 0.1];
-        let shoulder = [0.0, 1.5, -0.12];
-        b.beam(hip, shoulder, 0.2, 0.12, [1.0, 0.0, 0.0], jacket);
-        b.sphere([0.0, 1.68, -0.2], 0.14, helmet);
-        for side in [-1.0f32, 1.0] {
-            let knee = [side * 0.2, 0.95, -0.25];
-            b.beam(
-                [side * 0.1, 0.95, 0.1],
-                knee,
-                0.07,
-                0.08,
-                [0.0, 1.0, 0.0],
-                pants,
-            );
-            b.beam(
-                knee,
-                [side * 0.2, 0.45, -0.15],
-                0.06,
-                0.07,
-                [1.0, 0.0, 0.0],
-                pants,
-            );
-            b.beam(
-                [side * 0.2, 1.45, -0.1],
-                [side * 0.33, 1.08, head[2]],
-                0.05,
-                0.05,
-                [1.0, 0.0, 0.0],
-                jacket,
-            );
-        }
+        motorcyclist(&mut b, rng, head[2]);
     }
     (b, if rider { "with_rider" } else { "parked" }.to_string())
+}
+
+/// A rider astride a motorcycle whose handlebars are at `bars_z`: torso, helmet, legs on the
+/// footpegs and arms to the bars.
+fn motorcyclist(b: &mut Builder, rng: &mut Lcg, bars_z: f32) {
+    let jacket = b.material(
+        "jacket",
+        pick_color(
+            rng,
+            &[[30, 30, 34], [60, 60, 70], [120, 30, 30], [40, 60, 100]],
+            10.0,
+        ),
+    );
+    let pants = b.material("pants", [40, 44, 60]);
+    let helmet = b.material(
+        "helmet",
+        pick_color(rng, &[[20, 20, 20], [230, 230, 230], [180, 20, 20]], 8.0),
+    );
+    let hip = [0.0, 0.98, 0.1];
+    let shoulder = [0.0, 1.5, -0.12];
+    b.beam(hip, shoulder, 0.2, 0.12, [1.0, 0.0, 0.0], jacket);
+    b.sphere([0.0, 1.68, -0.2], 0.14, helmet);
+    for side in [-1.0f32, 1.0] {
+        let knee = [side * 0.2, 0.95, -0.25];
+        b.beam(
+            [side * 0.1, 0.95, 0.1],
+            knee,
+            0.07,
+            0.08,
+            [0.0, 1.0, 0.0],
+            pants,
+        );
+        b.beam(
+            knee,
+            [side * 0.2, 0.45, -0.15],
+            0.06,
+            0.07,
+            [1.0, 0.0, 0.0],
+            pants,
+        );
+        b.beam(
+            [side * 0.2, 1.45, -0.1],
+            [side * 0.33, 1.08, bars_z],
+            0.05,
+            0.05,
+            [1.0, 0.0, 0.0],
+            jacket,
+        );
+    }
 }

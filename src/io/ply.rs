@@ -228,24 +228,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         ));
     };
     check_points(vertex_def.count)?;
-    let names: Vec<&String> = vertex_def.properties.keys().collect();
-    for axis in ["x", "y", "z"] {
-        if !names.iter().any(|n| n.as_str() == axis) {
-            return Err(Problem::Malformed(format!(
-                "vertex element has no '{axis}' property"
-            )));
-        }
-    }
-    let has_color = (0..3).all(|c| names.iter().any(|n| role(n) == Role::Color(c)));
-    let attribute_defs: Vec<(String, ScalarKind)> = vertex_def
-        .properties
-        .values()
-        .filter(|p| role(&p.name) == Role::Other)
-        .filter_map(|p| match &p.data_type {
-            PropertyType::Scalar(t) => Some((p.name.clone(), kind_of(t))),
-            PropertyType::List(..) => None,
-        })
-        .collect();
+    let (has_color, attribute_defs) = vertex_layout(vertex_def)?;
 
     let ascii = header.encoding == PlyEncoding::Ascii;
     // After the header, ply-rs's tracker already names the next line (the first of the body).
@@ -268,6 +251,43 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         }
     }
 
+    Ok(into_cloud(&vertices, has_color, attribute_defs))
+}
+
+/// What a vertex element carries: whether it has all three colours, and its other scalar
+/// properties (name and type) in the file's order.
+type VertexLayout = (bool, Vec<(String, ScalarKind)>);
+
+/// The layout of `vertex_def`, refused without x, y and z.
+fn vertex_layout(vertex_def: &ElementDef) -> Result<VertexLayout, Problem> {
+    let names: Vec<&String> = vertex_def.properties.keys().collect();
+    for axis in ["x", "y", "z"] {
+        if !names.iter().any(|n| n.as_str() == axis) {
+            return Err(Problem::Malformed(format!(
+                "vertex element has no '{axis}' property"
+            )));
+        }
+    }
+    let has_color = (0..3).all(|c| names.iter().any(|n| role(n) == Role::Color(c)));
+    let attribute_defs = vertex_def
+        .properties
+        .values()
+        .filter(|p| role(&p.name) == Role::Other)
+        .filter_map(|p| match &p.data_type {
+            PropertyType::Scalar(t) => Some((p.name.clone(), kind_of(t))),
+            PropertyType::List(..) => None,
+        })
+        .collect();
+    Ok((has_color, attribute_defs))
+}
+
+/// The cloud of the `vertices` read, with colours when `has_color` and the attributes
+/// `attribute_defs` names.
+fn into_cloud(
+    vertices: &[Vertex],
+    has_color: bool,
+    attribute_defs: Vec<(String, ScalarKind)>,
+) -> PointCloud {
     let mut cloud = PointCloud {
         positions: vertices.iter().map(|v| v.xyz).collect(),
         colors: has_color.then(|| vertices.iter().map(|v| v.rgb).collect()),
@@ -282,7 +302,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
             values: vertices.iter().map(|v| v.extra[k]).collect(),
         })
         .collect();
-    Ok(cloud)
+    cloud
 }
 
 fn put_scalar(w: &mut impl Write, kind: ScalarKind, v: f64, big: bool) -> std::io::Result<()> {

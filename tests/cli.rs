@@ -198,6 +198,13 @@ fn eval_over_directories_matches_by_path_without_extension() {
             && stderr.lines().count() == 1,
         "{stderr}"
     );
+    // A folder that is not prepared data is named, with what it lacks.
+    fails(
+        &["eval", "--data", s(&gt), "--pred-dir", s(&pred)],
+        s(&gt),
+        "not a data directory from `mvpcc prepare` (no manifest.json",
+        &dir.path().join("none"),
+    );
 }
 
 #[test]

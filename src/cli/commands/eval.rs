@@ -343,12 +343,14 @@ fn dataset_samples(
     ground_truth: GroundTruth,
 ) -> anyhow::Result<Vec<DataSample>> {
     let manifest_path = data.join("manifest.json");
-    let text = std::fs::read_to_string(&manifest_path).with_context(|| {
-        format!(
-            "{}: not a data directory from `mvpcc prepare`",
-            manifest_path.display()
-        )
-    })?;
+    let text = match std::fs::read_to_string(&manifest_path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{}: not a data directory from `mvpcc prepare` (no manifest.json; an interrupted \
+             prepare writes it when run again to the end)",
+            data.display()
+        ),
+        read => read.with_context(|| format!("{}: cannot read", manifest_path.display()))?,
+    };
     let manifest: Manifest = serde_json::from_str(&text)
         .with_context(|| format!("{}: unreadable manifest", manifest_path.display()))?;
     let layout = Layout {

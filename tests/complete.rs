@@ -691,7 +691,8 @@ fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
     }
 }
 
-/// `--model` takes the folder `train --init` takes: a run's or one laid out as assets/.
+/// `--model` takes the folder `train --init` takes: a run's or one laid out as assets/; a
+/// folder without a generator and a missing file are named.
 #[test]
 fn a_model_folder_laid_out_as_assets_is_read() {
     let dir = TempDir::new().unwrap();
@@ -714,6 +715,14 @@ fn a_model_folder_laid_out_as_assets_is_read() {
         .failure()
         .stderr(predicate::str::contains(
             "empty: holds neither generator.safetensors nor model.safetensors",
+        ));
+    let missing = dir.path().join("missing.safetensors");
+    mvpcc()
+        .args(["complete", s(&input), s(&refused), "--model", s(&missing)])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "missing.safetensors: no such file",
         ));
     assert!(!refused.exists());
 }

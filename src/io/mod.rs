@@ -148,6 +148,14 @@ pub struct Loaded {
     pub non_finite_dropped: usize,
 }
 
+/// A whole file's bytes (weights), a missing file said in the words the cloud readers use.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
+    std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => Problem::NotFound,
+        _ => Problem::Io(e),
+    })
+}
+
 /// Reads a cloud; the format comes from the extension unless `format` is given.
 ///
 /// ```

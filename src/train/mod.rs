@@ -169,7 +169,10 @@ impl InitWeights {
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>, TrainError> {
-    std::fs::read(path).map_err(io_err(path))
+    crate::io::read_bytes(path).map_err(|source| TrainError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 impl Default for TrainSettings {
@@ -265,6 +268,11 @@ pub enum TrainError {
     },
     #[error("{}: {problem}", path.display())]
     Run { path: PathBuf, problem: String },
+    #[error("{}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: crate::io::Problem,
+    },
     #[error("--init: {0}")]
     NoGenerator(#[from] weights::NoGenerator),
     /// A weights file (`--init`, `--vgg19`) that cannot be used; `context` names the option.

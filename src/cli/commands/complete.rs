@@ -13,7 +13,7 @@ use mvpcc::complete::{
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
-use mvpcc::io::{atomic_write, check_output, same_file, write_cloud, Format};
+use mvpcc::io::{atomic_write, check_output, read_bytes, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::model::weights::generator_in;
@@ -67,7 +67,7 @@ fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Re
             } else {
                 path.to_path_buf()
             };
-            let bytes = std::fs::read(&file).with_context(|| format!("{}", file.display()))?;
+            let bytes = read_bytes(&file).map_err(|p| anyhow!("{}: {p}", file.display()))?;
             Inpainter::from_bytes(&bytes, opened.device)
                 .with_context(|| format!("{}", file.display()))?
         }
@@ -83,7 +83,7 @@ fn load_model(path: Option<&Path>, device: DeviceChoice, log: Log) -> anyhow::Re
 fn load_orienter(path: Option<&Path>) -> anyhow::Result<Orienter> {
     match path {
         Some(path) => {
-            let bytes = std::fs::read(path).with_context(|| format!("{}", path.display()))?;
+            let bytes = read_bytes(path).map_err(|p| anyhow!("{}: {p}", path.display()))?;
             Orienter::from_bytes(&bytes, Device::flex())
                 .with_context(|| format!("{}", path.display()))
         }

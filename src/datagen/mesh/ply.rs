@@ -49,6 +49,15 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
         }],
         ..Mesh::default()
     };
+    add_vertices(&mut mesh, vertices);
+    let faces = ply.payload.get("face").map(Vec::as_slice).unwrap_or(&[]);
+    add_faces(&mut mesh, faces).map_err(|problem| fail(problem.into()))?;
+    Ok(mesh)
+}
+
+/// The `vertices`' positions into `mesh`, with their colours when they all have red, green
+/// and blue; without colours the one material is a mid grey.
+fn add_vertices(mesh: &mut Mesh, vertices: &[DefaultElement]) {
     let colored = vertices.first().is_some_and(|v| {
         v.contains_key("red") && v.contains_key("green") && v.contains_key("blue")
     });
@@ -73,17 +82,22 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
     } else {
         mesh.materials[0].color = [0.6; 3];
     }
+}
+
+/// The `faces` into `mesh` as triangles (polygons fanned from their first corner), all of the
+/// first material; refused when a face has no index list or names a missing vertex.
+fn add_faces(mesh: &mut Mesh, faces: &[DefaultElement]) -> Result<(), &'static str> {
     let n = mesh.positions.len() as i64;
-    for face in ply.payload.get("face").map(Vec::as_slice).unwrap_or(&[]) {
+    for face in faces {
         let Some(list) = face
             .get("vertex_indices")
             .or_else(|| face.get("vertex_index"))
             .and_then(indices)
         else {
-            return Err(fail("faces have no vertex_indices list".into()));
+            return Err("faces have no vertex_indices list");
         };
         if list.iter().any(|&i| i < 0 || i >= n) {
-            return Err(fail("a face refers to a vertex that does not exist".into()));
+            return Err("a face refers to a vertex that does not exist");
         }
         for k in 1..list.len().saturating_sub(1) {
             mesh.triangles
@@ -91,7 +105,7 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
             mesh.material_of.push(0);
         }
     }
-    Ok(mesh)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -353,6 +353,11 @@ pub fn complete(
         plane,
     } = framed(input, options)?;
     let mut warnings = distribution_warnings(&measured);
+    warnings.extend(
+        options
+            .vehicle_width
+            .and_then(|width| width_warning(width, frame.extent)),
+    );
     let mut timings = Timings::default();
 
     // Mirror images first: they come from measured points, so they are trusted over the network.
@@ -700,6 +705,23 @@ fn assemble(input: &PointCloud, frame: &Frame, added: &[Added], keep_input: bool
 
 /// Warnings for inputs far from the street vehicles the model learned: too few points, a thin
 /// (pole- or wire-like) shape, or points in one plane (a single scan line, a wall).
+/// A vehicle width this far from the cloud's size (its box's largest side) is more likely in
+/// other units than the cloud's: below a fiftieth (a 60 m train is 20 times its width) or
+/// above twice (a partial shorter than the vehicle is wide). Such a width bounds no plane
+/// found, and misplaces one where none is.
+const WIDTH_RATIOS: (f64, f64) = (0.02, 2.0);
+
+/// The warning for a vehicle `width` outside [`WIDTH_RATIOS`] of the cloud's `extent`.
+fn width_warning(width: f64, extent: f64) -> Option<String> {
+    let ratio = width / extent;
+    (!(WIDTH_RATIOS.0..=WIDTH_RATIOS.1).contains(&ratio)).then(|| {
+        format!(
+            "the vehicle width given ({width}) is {ratio:.3} times the cloud's size \
+             ({extent:.3}): is it in the cloud's units?"
+        )
+    })
+}
+
 fn distribution_warnings(points: &[[f64; 3]]) -> Vec<String> {
     let mut warnings = Vec::new();
     if points.len() < SPARSE_POINTS {
@@ -764,6 +786,28 @@ mod tests {
             p[2] += 5_270_000.0;
         }
         cloud
+    }
+
+    /// A width in other units than the cloud's (millimetres for a cloud in metres) is named.
+    #[test]
+    fn a_vehicle_width_in_other_units_is_warned_about() {
+        let input = partial();
+        let with = |width| {
+            let options = Options {
+                vehicle_width: Some(width),
+                ..options(Method::Mirror)
+            };
+            complete(&input, None, &options).unwrap().warnings
+        };
+        assert!(with(1.8).iter().all(|w| !w.contains("vehicle width")));
+        for width in [1800.0, 0.0018] {
+            assert!(
+                with(width)
+                    .iter()
+                    .any(|w| w.contains("the vehicle width given") && w.contains("units")),
+                "{width}"
+            );
+        }
     }
 
     fn tiny_inpainter() -> Inpainter {

@@ -450,8 +450,8 @@ impl RunLog {
         Ok(())
     }
 
-    /// The run's curves (`losses.png`): three training losses and three validation scores,
-    /// the last beside the partial inputs' own.
+    /// The run's curves (`losses.png`): three training losses, and three validation scores
+    /// each beside the partial inputs' own.
     fn draw(&self, run: &Path) -> Result<(), TrainError> {
         let Curves {
             train,

@@ -779,3 +779,30 @@ fn batch_jobs_are_bounded() {
         assert!(!outputs.exists());
     }
 }
+
+/// An output folder inside the input folder is not read as input: a second run completed the
+/// first one's outputs again, into a folder one level deeper each time.
+#[test]
+fn an_output_folder_inside_the_inputs_is_not_completed_again() {
+    let dir = TempDir::new().unwrap();
+    let inputs = dir.path().join("in");
+    std::fs::create_dir_all(inputs.join("street")).unwrap();
+    for name in ["a.ply", "street/b.ply"] {
+        write_cloud(&inputs.join(name), &scan(3), None, Encoding::Binary).unwrap();
+    }
+    let outputs = inputs.join("completed");
+    for _ in 0..2 {
+        let assert = complete_dir(&inputs, &outputs)
+            .args(["--method", "mirror", "--json"])
+            .assert()
+            .success();
+        let report: serde_json::Value =
+            serde_json::from_slice(&assert.get_output().stdout).unwrap();
+        assert_eq!(
+            (&report["files"], &report["completed"]),
+            (&2.into(), &2.into())
+        );
+    }
+    assert!(outputs.join("street/b.ply").exists());
+    assert!(!outputs.join("completed").exists());
+}

@@ -13,7 +13,7 @@ use mvpcc::complete::{
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
-use mvpcc::io::{atomic_write, check_output, read_bytes, same_file, write_cloud, Format};
+use mvpcc::io::{atomic_write, check_output, read_bytes, resolved, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::model::weights::generator_in;
@@ -458,8 +458,14 @@ enum BatchEntry {
 }
 
 /// The batch's inputs relative to its root, this shard's only: the list's, or the cloud files
-/// (or those `--include` matches) under the root.
-fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>> {
+/// (or those `--include` matches) under the root, those under `output_dir` left out where it
+/// lies inside the root (a second run would complete the first one's outputs again, a folder
+/// deeper each time).
+fn batch_files(
+    root: &Path,
+    output_dir: &Path,
+    args: &CompleteArgs,
+) -> anyhow::Result<Vec<PathBuf>> {
     let files = match &args.list {
         Some(list) => read_list(list, root)?,
         None => {
@@ -467,12 +473,19 @@ fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>>
                 bail!("{}: not a directory", root.display());
             }
             let pattern: Option<Vec<char>> = args.include.as_ref().map(|p| p.chars().collect());
-            let files = walk(root, |path| match &pattern {
-                Some(p) => {
-                    let name = path.file_name().unwrap_or_default().to_string_lossy();
-                    matches(p, &name.chars().collect::<Vec<_>>())
-                }
-                None => Format::from_path(path).is_ok(),
+            let outputs = nested_output(root, output_dir);
+            let files = walk(root, |path| {
+                let wanted = match &pattern {
+                    Some(p) => {
+                        let name = path.file_name().unwrap_or_default().to_string_lossy();
+                        matches(p, &name.chars().collect::<Vec<_>>())
+                    }
+                    None => Format::from_path(path).is_ok(),
+                };
+                wanted
+                    && outputs
+                        .as_ref()
+                        .is_none_or(|out| !resolved(path).starts_with(out))
             })?;
             match (&args.include, files.is_empty()) {
                 (Some(include), true) => {
@@ -491,6 +504,14 @@ fn batch_files(root: &Path, args: &CompleteArgs) -> anyhow::Result<Vec<PathBuf>>
             .collect(),
         None => files,
     })
+}
+
+/// `output_dir` resolved, when it lies inside `root` (and is not `root` itself, where each
+/// output is refused for overwriting its input instead).
+fn nested_output(root: &Path, output_dir: &Path) -> Option<PathBuf> {
+    let root = root.canonicalize().ok()?;
+    let out = resolved(output_dir);
+    (out != root && out.starts_with(&root)).then_some(out)
 }
 
 /// Where the output of `relative` goes.
@@ -540,7 +561,7 @@ fn batch_entry(
 fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result<()> {
     let output_dir = args.output_dir.as_deref().expect("clap requires it");
     let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
-    let files = batch_files(&root, args)?;
+    let files = batch_files(&root, output_dir, args)?;
     std::fs::create_dir_all(output_dir)
         .with_context(|| format!("{}: cannot create", output_dir.display()))?;
     let bar = progress(files.len(), "completing", log);

@@ -198,6 +198,19 @@ fn eval_over_directories_matches_by_path_without_extension() {
             && stderr.lines().count() == 1,
         "{stderr}"
     );
+    // Predictions kept in a folder inside the ground truth's are not taken as ground truth.
+    let inner = gt.join("pred");
+    std::fs::create_dir_all(&inner).unwrap();
+    for name in ["a", "c"] {
+        let path = inner.join(format!("{name}.ply"));
+        write_cloud(&path, &full.cloud, None, Encoding::Binary).unwrap();
+    }
+    std::fs::remove_dir_all(gt.join("sub")).unwrap();
+    for name in ["e", "f", "g", "h", "i", "j", "k"] {
+        std::fs::remove_file(gt.join(format!("{name}.ply"))).unwrap();
+    }
+    let v = eval_json(&["--pred-dir", s(&inner), "--gt-dir", s(&gt)]);
+    assert_eq!(v["pairs"].as_array().unwrap().len(), 2);
     // A folder that is not prepared data is named, with what it lacks.
     fails(
         &["eval", "--data", s(&gt), "--pred-dir", s(&pred)],

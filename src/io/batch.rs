@@ -104,6 +104,19 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     })
 }
 
+/// `inner` with its links followed, when it lies inside `root` and is not `root` itself: a
+/// folder (a batch's outputs) whose files a walk of `root` should leave out.
+pub fn nested_dir(root: &Path, inner: &Path) -> Option<PathBuf> {
+    let root = root.canonicalize().ok()?;
+    let inner = super::resolved(inner);
+    (inner != root && inner.starts_with(&root)).then_some(inner)
+}
+
+/// Whether `path`, its links followed, lies in the folder `dir` (as [`nested_dir`] gives it).
+pub fn lies_in(path: &Path, dir: &Path) -> bool {
+    super::resolved(path).starts_with(dir)
+}
+
 /// Files under `dir` that `wanted` accepts, as sorted paths relative to `dir`. Hidden entries
 /// (a leading `.`, such as the temporary files of an interrupted write) are skipped. Links are
 /// followed, but each directory and file is taken once: a link back into the tree (or to its
@@ -266,6 +279,20 @@ mod tests {
                 "{message}"
             );
         }
+    }
+
+    #[test]
+    fn a_folder_is_nested_only_strictly_inside_the_root() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("in");
+        std::fs::create_dir_all(root.join("out")).unwrap();
+        let nested = nested_dir(&root, &root.join("out/later")).unwrap();
+        assert!(lies_in(&root.join("out/later/a.ply"), &nested));
+        assert!(!lies_in(&root.join("out/a.ply"), &nested));
+        assert!(nested_dir(&root, &root).is_none());
+        assert!(nested_dir(&root, &root.join(".")).is_none());
+        assert!(nested_dir(&root, &dir.path().join("elsewhere")).is_none());
+        assert!(nested_dir(&root.join("out"), &root).is_none());
     }
 
     #[cfg(unix)]

@@ -13,7 +13,7 @@ use mvpcc::complete::{
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
-use mvpcc::io::{atomic_write, check_output, read_bytes, resolved, same_file, write_cloud, Format};
+use mvpcc::io::{atomic_write, check_output, read_bytes, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::model::weights::generator_in;
@@ -473,7 +473,7 @@ fn batch_files(
                 bail!("{}: not a directory", root.display());
             }
             let pattern: Option<Vec<char>> = args.include.as_ref().map(|p| p.chars().collect());
-            let outputs = nested_output(root, output_dir);
+            let outputs = batch::nested_dir(root, output_dir);
             let files = walk(root, |path| {
                 let wanted = match &pattern {
                     Some(p) => {
@@ -485,7 +485,7 @@ fn batch_files(
                 wanted
                     && outputs
                         .as_ref()
-                        .is_none_or(|out| !resolved(path).starts_with(out))
+                        .is_none_or(|out| !batch::lies_in(path, out))
             })?;
             match (&args.include, files.is_empty()) {
                 (Some(include), true) => {
@@ -504,14 +504,6 @@ fn batch_files(
             .collect(),
         None => files,
     })
-}
-
-/// `output_dir` resolved, when it lies inside `root` (and is not `root` itself, where each
-/// output is refused for overwriting its input instead).
-fn nested_output(root: &Path, output_dir: &Path) -> Option<PathBuf> {
-    let root = root.canonicalize().ok()?;
-    let out = resolved(output_dir);
-    (out != root && out.starts_with(&root)).then_some(out)
 }
 
 /// Where the output of `relative` goes.

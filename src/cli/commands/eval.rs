@@ -5,7 +5,7 @@ use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
 use mvpcc::datagen::scan::PartialSpec;
-use mvpcc::io::batch::walk;
+use mvpcc::io::batch::{self, walk};
 use mvpcc::io::Format;
 use mvpcc::metrics::{compare_clouds, compare_images, CloudMetrics, FScore, ImageMetrics};
 use mvpcc::views::projection::CHANNELS;
@@ -22,10 +22,17 @@ struct Pair {
 
 /// The clouds under `dir` (walked as `complete --input-dir` walks), keyed by their path
 /// relative to `dir` without the extension, so a batch's output tree pairs with its ground
-/// truth's.
-fn cloud_files(dir: &Path, format: Option<Format>) -> anyhow::Result<BTreeMap<String, PathBuf>> {
+/// truth's; those under `other` (the other side's folder) are left out where it lies inside
+/// `dir`, as a batch's outputs inside its inputs do.
+fn cloud_files(
+    dir: &Path,
+    other: &Path,
+    format: Option<Format>,
+) -> anyhow::Result<BTreeMap<String, PathBuf>> {
+    let nested = batch::nested_dir(dir, other);
     let relative = walk(dir, |path| {
-        format.is_some() || Format::from_path(path).is_ok()
+        (format.is_some() || Format::from_path(path).is_ok())
+            && nested.as_ref().is_none_or(|n| !batch::lies_in(path, n))
     })?;
     let mut files = BTreeMap::new();
     for path in relative {
@@ -60,8 +67,8 @@ fn matched_pairs(
     gt_dir: &Path,
     format: Option<Format>,
 ) -> anyhow::Result<Vec<Pair>> {
-    let preds = cloud_files(pred_dir, format)?;
-    let gts = cloud_files(gt_dir, format)?;
+    let preds = cloud_files(pred_dir, gt_dir, format)?;
+    let gts = cloud_files(gt_dir, pred_dir, format)?;
     let only_pred: Vec<&str> = preds
         .keys()
         .filter(|k| !gts.contains_key(*k))

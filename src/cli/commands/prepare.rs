@@ -7,7 +7,8 @@ use mvpcc::datagen::data::{
     Source, ViewsFrame, MANIFEST_FILE, MAX_SAMPLES, PARAMS_FILE, TEST, TRAIN,
 };
 use mvpcc::datagen::scan::{PartialParams, MAX_PARTIAL_POINTS};
-use mvpcc::io::{atomic_write, resolved};
+use mvpcc::io::atomic_write;
+use mvpcc::io::batch::lies_in;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -29,12 +30,6 @@ struct Summary {
     shard: Option<String>,
     /// The manifest written, by a run without `--shard`.
     manifest: Option<String>,
-}
-
-/// Whether `path` (which need not exist yet) is `dir` or lies under it, links followed.
-fn inside(path: &Path, dir: &Path) -> bool {
-    dir.canonicalize()
-        .is_ok_and(|dir| resolved(path).starts_with(dir))
 }
 
 /// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
@@ -308,7 +303,11 @@ fn find_meshes(
     log: Log,
 ) -> anyhow::Result<(PathBuf, Vec<Source>, Vec<Skipped>)> {
     let meshes = meshes_dir(args, log)?;
-    if args.meshes.is_some() && inside(&args.out, &meshes) {
+    // Links followed (a link to the meshes folder is that folder); `--out` need not exist yet.
+    let out_inside = meshes
+        .canonicalize()
+        .is_ok_and(|meshes| lies_in(&args.out, &meshes));
+    if args.meshes.is_some() && out_inside {
         bail!(
             "{}: --out lies in the --meshes folder {}, whose next scan would read its clouds as meshes",
             args.out.display(),

@@ -361,23 +361,15 @@ pub fn complete(
     let mut timings = Timings::default();
 
     // Mirror images first: they come from measured points, so they are trusted over the network.
-    let mirror_plane = match options.method {
-        Method::Identity => None,
-        Method::Mirror => plane,
-        Method::Network => plane.filter(|_| options.symmetry),
-    };
-    if options.method == Method::Mirror && plane.is_none() {
-        warnings.push("no symmetry plane found; nothing is mirrored".to_string());
-    }
     let measured_index = KnnIndex::new(&measured);
-    let mut added = mirror_plane.map_or_else(Vec::new, |plane| {
+    let mut added = mirror_plane(plane, options, &mut warnings).map_or_else(Vec::new, |plane| {
         mirror_images(&measured, &measured_index, plane)
     });
-    let mut mirrored = added.len();
     timings.symmetry = symmetry_start.elapsed();
 
+    let keep_input = options.keep_input || options.method != Method::Network;
+    let mirrored = if keep_input { added.len() } else { 0 };
     let mut filtered_out = 0;
-    let mut keep_input = true;
     let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
@@ -385,24 +377,23 @@ pub fn complete(
         filtered_out = network.filtered_out;
         views = network.views;
         let start = Instant::now();
-        if options.keep_input {
-            let fill = gap_fill(&measured, &added, &network.predicted, options);
-            added.extend(network_points(&fill, &measured_index));
-        } else {
-            keep_input = false;
-            mirrored = 0;
-            added = network_points(&network.predicted, &measured_index);
-        }
+        added = with_network(
+            &measured,
+            &measured_index,
+            added,
+            &network.predicted,
+            options,
+        );
         timings.reprojection += start.elapsed();
     }
 
     let cloud = assemble(input, &frame, &added, keep_input);
-    let mut normalized = if keep_input {
-        measured.clone()
-    } else {
-        Vec::new()
-    };
-    normalized.extend(added.iter().map(|a| a.position));
+    let kept: &[[f64; 3]] = if keep_input { &measured } else { &[] };
+    let normalized = kept
+        .iter()
+        .copied()
+        .chain(added.iter().map(|a| a.position))
+        .collect();
     Ok(Completion {
         cloud,
         normalized,
@@ -417,6 +408,43 @@ pub fn complete(
         timings,
         views,
     })
+}
+
+/// The plane the measured points are mirrored about: none for `identity`, nor for the network
+/// with `--no-symmetry`; a `mirror` run without one says so in `warnings`.
+fn mirror_plane(
+    plane: Option<Plane>,
+    options: &Options,
+    warnings: &mut Vec<String>,
+) -> Option<Plane> {
+    match options.method {
+        Method::Identity => None,
+        Method::Mirror => {
+            if plane.is_none() {
+                warnings.push("no symmetry plane found; nothing is mirrored".to_string());
+            }
+            plane
+        }
+        Method::Network => plane.filter(|_| options.symmetry),
+    }
+}
+
+/// The points added to the measured ones once the network has run: the mirror images `added`
+/// and the network's points in the gaps they leave, or, without `keep_input`, the network's
+/// cloud alone (the paper's output).
+fn with_network(
+    measured: &[[f64; 3]],
+    measured_index: &KnnIndex,
+    mut added: Vec<Added>,
+    predicted: &PointCloud,
+    options: &Options,
+) -> Vec<Added> {
+    if !options.keep_input {
+        return network_points(predicted, measured_index);
+    }
+    let fill = gap_fill(measured, &added, predicted, options);
+    added.extend(network_points(&fill, measured_index));
+    added
 }
 
 /// The network's frame for an input, the measured points in it, and the symmetry plane.

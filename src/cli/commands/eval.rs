@@ -3,7 +3,7 @@ use crate::cli::args::{EvalArgs, GroundTruth, Metric, Normalize};
 use anyhow::{bail, Context};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
-use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, TEST};
+use mvpcc::datagen::data::{coarse, Layout, Manifest, GT_COARSE, GT_FINE, MANIFEST_FILE, TEST};
 use mvpcc::datagen::scan::PartialSpec;
 use mvpcc::io::batch::{self, walk};
 use mvpcc::io::Format;
@@ -349,17 +349,7 @@ fn dataset_samples(
     pred_dir: &Path,
     ground_truth: GroundTruth,
 ) -> anyhow::Result<Vec<DataSample>> {
-    let manifest_path = data.join("manifest.json");
-    let text = match std::fs::read_to_string(&manifest_path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
-            "{}: not a data directory from `mvpcc prepare` (no manifest.json; an interrupted \
-             prepare writes it when run again to the end)",
-            data.display()
-        ),
-        read => read.with_context(|| format!("{}: cannot read", manifest_path.display()))?,
-    };
-    let manifest: Manifest = serde_json::from_str(&text)
-        .with_context(|| format!("{}: unreadable manifest", manifest_path.display()))?;
+    let manifest = read_manifest(data)?;
     let layout = Layout {
         root: data.to_path_buf(),
     };
@@ -400,6 +390,21 @@ fn dataset_samples(
         bail!("{}: the data has no test partials", data.display());
     }
     Ok(samples)
+}
+
+/// The manifest of the data directory `data`, which only a finished `mvpcc prepare` writes.
+fn read_manifest(data: &Path) -> anyhow::Result<Manifest> {
+    let manifest_path = data.join(MANIFEST_FILE);
+    let text = match std::fs::read_to_string(&manifest_path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "{}: not a data directory from `mvpcc prepare` (no manifest.json; an interrupted \
+             prepare writes it when run again to the end)",
+            data.display()
+        ),
+        read => read.with_context(|| format!("{}: cannot read", manifest_path.display()))?,
+    };
+    serde_json::from_str(&text)
+        .with_context(|| format!("{}: unreadable manifest", manifest_path.display()))
 }
 
 /// A completion scored against its ground truth, in the object's frame (a scanner partial is

@@ -5,22 +5,14 @@ use mvpcc::complete::filter::inliers;
 use mvpcc::io::{check_output, write_cloud};
 use mvpcc::views::reprojection::{reproject, ReprojectOptions};
 use mvpcc::views::{color_path, find_views, locations_path, read_views, ViewsInfo, INFO_FILE};
+use std::path::{Path, PathBuf};
 
 pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = match &args.views {
         Some(v) => v.0.clone(),
         None => find_views(&args.viewdir)?,
     };
-    let inputs: Vec<_> = cameras
-        .iter()
-        .flat_map(|&c| {
-            [
-                locations_path(&args.viewdir, c),
-                color_path(&args.viewdir, c),
-            ]
-        })
-        .chain([args.viewdir.join(INFO_FILE)])
-        .collect();
+    let inputs = view_files(&args.viewdir, &cameras);
     check_output(
         &args.output,
         &inputs.iter().map(|p| p.as_path()).collect::<Vec<_>>(),
@@ -66,4 +58,14 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
         merged.len() - output.len()
     ));
     Ok(())
+}
+
+/// The files a view directory's re-projection reads: each camera's two images and the info file,
+/// none of which the output may overwrite.
+fn view_files(viewdir: &Path, cameras: &[usize]) -> Vec<PathBuf> {
+    cameras
+        .iter()
+        .flat_map(|&c| [locations_path(viewdir, c), color_path(viewdir, c)])
+        .chain([viewdir.join(INFO_FILE)])
+        .collect()
 }

@@ -32,6 +32,46 @@ struct Summary {
     manifest: Option<String>,
 }
 
+/// What one run of `prepare` did: models made now, models found made before, its seconds.
+struct Finished {
+    new: usize,
+    resumed: usize,
+    seconds: f64,
+}
+
+/// The run's summary over every model prepared so far (`done`, in any order) and every mesh
+/// skipped; writes the manifest when `manifest` names the output folder (a run without
+/// `--shard`).
+fn summarize(
+    mut done: Vec<ModelEntry>,
+    mut skipped: Vec<Skipped>,
+    run: &Finished,
+    shard: Option<String>,
+    manifest: Option<(&Path, PrepareParams)>,
+) -> anyhow::Result<Summary> {
+    done.sort_by(|a, b| (&a.category, &a.name).cmp(&(&b.category, &b.name)));
+    skipped.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(Summary {
+        models: done.len(),
+        resumed: run.resumed,
+        train: done.iter().filter(|m| m.split == TRAIN).count(),
+        test: done.iter().filter(|m| m.split == TEST).count(),
+        samples: done.iter().map(|m| m.samples.len()).sum(),
+        skipped: skipped.len(),
+        seconds: run.seconds,
+        models_per_second: if run.seconds > 0.0 {
+            run.new as f64 / run.seconds
+        } else {
+            0.0
+        },
+        shard,
+        manifest: match manifest {
+            Some((out, params)) => Some(write_manifest(out, params, done, skipped)?),
+            None => None,
+        },
+    })
+}
+
 /// The meshes to prepare: `--meshes`, or `--synth` objects generated into OUT/meshes.
 fn meshes_dir(args: &PrepareArgs, log: Log) -> anyhow::Result<PathBuf> {
     match (&args.meshes, args.synth) {
@@ -260,32 +300,22 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     }
     let started = std::time::Instant::now();
     let (made, failed) = prepare_all(&todo, &params, &layout, log)?;
-    let seconds = started.elapsed().as_secs_f64();
-    let new = made.len();
-    done.extend(made);
-    done.sort_by(|a, b| (&a.category, &a.name).cmp(&(&b.category, &b.name)));
-    skipped.extend(failed);
-    skipped.sort_by(|a, b| a.path.cmp(&b.path));
-    let summary = Summary {
-        models: done.len(),
+    let run = Finished {
+        new: made.len(),
         resumed,
-        train: done.iter().filter(|m| m.split == TRAIN).count(),
-        test: done.iter().filter(|m| m.split == TEST).count(),
-        samples: done.iter().map(|m| m.samples.len()).sum(),
-        skipped: skipped.len(),
-        seconds,
-        models_per_second: if seconds > 0.0 {
-            new as f64 / seconds
-        } else {
-            0.0
-        },
-        shard: args.shard.map(|s| s.to_string()),
-        manifest: match args.shard {
-            Some(_) => None,
-            None => Some(write_manifest(out, params, done, skipped)?),
-        },
+        seconds: started.elapsed().as_secs_f64(),
     };
-    log.info(summary_line(&summary, new));
+    done.extend(made);
+    skipped.extend(failed);
+    let manifest = args.shard.is_none().then_some((out.as_path(), params));
+    let summary = summarize(
+        done,
+        skipped,
+        &run,
+        args.shard.map(|s| s.to_string()),
+        manifest,
+    )?;
+    log.info(summary_line(&summary, run.new));
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     }

@@ -8,7 +8,7 @@ use crate::core::rng::{derive_seed, Lcg};
 use crate::model::gan::value;
 use crate::train::dataset::{hold_back, scan_split, Cache, DataError, SampleRef};
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -196,16 +196,9 @@ pub fn train_orienter(
     let score = |net: &OrienterNet| scores_on(net, config, device, &val_set);
     let mut draw = Lcg::new(derive_seed(settings.seed, "orient draws"));
     for step in 1..=settings.steps {
-        let (inputs, targets) = draw_batch(train, settings, n, &mut draw, &load)?;
-        let b = settings.batch;
-        // [batch, N, 3]
-        let x = Tensor::<3>::from_data(TensorData::new(inputs, [b, n, 3]), &autodiff);
-        // [batch, 4]
-        let y = Tensor::<2>::from_data(TensorData::new(targets, [b, 4]), &autodiff);
-        let loss = (net.forward(x) - y).powi_scalar(2).mean();
-        let value = value(loss.clone());
-        let grads = GradientsParams::from_grads(loss.backward(), &net);
-        net = optim.step(settings.learning_rate, net, grads);
+        let batch = draw_batch(train, settings, n, &mut draw, &load)?;
+        let value;
+        (net, value) = fit_step(net, &mut optim, batch, settings, n, &autodiff);
 
         let validation = (settings.val_every > 0
             && (step % settings.val_every == 0 || step == settings.steps))
@@ -233,6 +226,31 @@ pub fn train_orienter(
         Orienter::new(net.valid(), config.clone(), device.clone()),
         scores,
     ))
+}
+
+/// One Adam step on the squared error between the net's output and the batch's targets; the
+/// updated net and the loss before the step.
+///
+/// # Shapes
+/// - `batch.0`: `[batch, n, 3]` points, flattened
+/// - `batch.1`: `[batch, 4]` targets, flattened
+fn fit_step(
+    net: OrienterNet,
+    optim: &mut ModuleOptimizer,
+    (inputs, targets): (Vec<f32>, Vec<f32>),
+    settings: &OrientSettings,
+    n: usize,
+    device: &Device,
+) -> (OrienterNet, f32) {
+    let b = settings.batch;
+    // [batch, N, 3]
+    let x = Tensor::<3>::from_data(TensorData::new(inputs, [b, n, 3]), device);
+    // [batch, 4]
+    let y = Tensor::<2>::from_data(TensorData::new(targets, [b, 4]), device);
+    let loss = (net.forward(x) - y).powi_scalar(2).mean();
+    let value = value(loss.clone());
+    let grads = GradientsParams::from_grads(loss.backward(), &net);
+    (optim.step(settings.learning_rate, net, grads), value)
 }
 
 /// The heading errors of `net` (degrees) over the validation partials `val_set`.

@@ -206,28 +206,8 @@ impl Gan {
                     (0.0, Vec::new())
                 }
             };
-            // Where a term needs it, the generator's loss flows through the discriminator but
-            // must not train it: a copy whose weights record no gradient spares the backward
-            // pass their gradients.
-            let judge = self.discriminator.clone().no_grad();
-            let g = generator_losses(
-                &output,
-                target,
-                &judge,
-                &real_features,
-                self.vgg.as_ref(),
-                self.depth_axes.as_ref(),
-                &self.weights,
-            );
-            clock.done(StepPhase::GeneratorLoss);
-            g_grads.accumulate(
-                &self.generator,
-                GradientsParams::from_grads(
-                    g.total.clone().mul_scalar(share).backward(),
-                    &self.generator,
-                ),
-            );
-            clock.done(StepPhase::GeneratorBackward);
+            let g =
+                self.generator_step(&output, target, &real_features, share, &mut g_grads, clock);
             sum = sum.plus(&StepLosses::read(d_loss, g));
         }
         if game {
@@ -242,6 +222,41 @@ impl Gan {
             .step(learning_rate, self.generator, g_grads.grads());
         clock.done(StepPhase::Optimizers);
         (self, sum.scaled(share as f32))
+    }
+
+    /// The generator's losses on one batch, their gradients accumulated into `g_grads` with
+    /// `share` of the step's weight; `real_features` are the discriminator's features of the
+    /// real views (empty when no term needs them).
+    fn generator_step<C: StepClock>(
+        &self,
+        output: &GeneratorOutput,
+        target: &Target,
+        real_features: &[Tensor<4>],
+        share: f64,
+        g_grads: &mut GradientsAccumulator<Generator>,
+        clock: &mut C,
+    ) -> GeneratorLosses {
+        // Where a term needs it, the generator's loss flows through the discriminator but
+        // must not train it: a copy whose weights record no gradient spares the backward
+        // pass their gradients.
+        let judge = self.discriminator.clone().no_grad();
+        let g = generator_losses(
+            output,
+            target,
+            &judge,
+            real_features,
+            self.vgg.as_ref(),
+            self.depth_axes.as_ref(),
+            &self.weights,
+        );
+        clock.done(StepPhase::GeneratorLoss);
+        let grads = g.total.clone().mul_scalar(share).backward();
+        g_grads.accumulate(
+            &self.generator,
+            GradientsParams::from_grads(grads, &self.generator),
+        );
+        clock.done(StepPhase::GeneratorBackward);
+        g
     }
 
     /// The discriminator's loss on one batch, its gradients accumulated into `d_grads` with

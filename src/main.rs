@@ -5,7 +5,9 @@ use std::process::ExitCode;
 
 fn main() -> ExitCode {
     let cli = Cli::parse_negatives();
-    match cli::commands::run(cli) {
+    let result = cli::commands::run(cli);
+    mvpcc::io::stdio::release_stdin();
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {}", cli::one_line(&e));

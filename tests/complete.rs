@@ -806,3 +806,66 @@ fn an_output_folder_inside_the_inputs_is_not_completed_again() {
     assert!(outputs.join("street/b.ply").exists());
     assert!(!outputs.join("completed").exists());
 }
+
+#[test]
+fn a_dash_reads_standard_input_and_writes_standard_output() {
+    let dir = TempDir::new().unwrap();
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example/car_partial.ply");
+    let bytes = std::fs::read(&input).unwrap();
+    let file_out = dir.path().join("out.ply");
+    mvpcc()
+        .args(["complete", s(&input), s(&file_out), "--method", "mirror"])
+        .assert()
+        .success();
+    // Through the pipes: the format told by the first bytes and kept for the output, the log on
+    // stderr, the cloud alone on stdout.
+    let piped = mvpcc()
+        .args(["complete", "-", "-", "--method", "mirror"])
+        .write_stdin(bytes.clone())
+        .assert()
+        .success()
+        .stderr(predicate::str::starts_with("-: "))
+        .get_output()
+        .stdout
+        .clone();
+    assert_eq!(piped, std::fs::read(&file_out).unwrap());
+    mvpcc()
+        .args(["complete", s(&input), "-", "--json"])
+        .assert()
+        .failure()
+        .stdout("")
+        .stderr(predicate::str::contains(
+            "-: --json and the completed cloud cannot both go to standard output",
+        ));
+    let refused = dir.path().join("refused.ply");
+    mvpcc()
+        .args(["complete", "-", s(&refused)])
+        .write_stdin(Vec::<u8>::new())
+        .assert()
+        .failure()
+        .stderr("error: -: file is empty\n");
+    mvpcc()
+        .args(["filter", s(&input), "-"])
+        .assert()
+        .failure()
+        .stdout("")
+        .stderr(predicate::str::contains(
+            "-: standard output has no extension to tell the format: pass --out-format",
+        ));
+    // A file named `-` is `./-`.
+    mvpcc()
+        .current_dir(dir.path())
+        .args([
+            "complete",
+            s(&input),
+            "./-",
+            "--out-format",
+            "ply",
+            "--method",
+            "mirror",
+        ])
+        .assert()
+        .success();
+    assert_eq!(std::fs::read(dir.path().join("-")).unwrap(), piped);
+    assert!(!refused.exists());
+}

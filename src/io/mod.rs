@@ -5,12 +5,14 @@ pub mod batch;
 mod las;
 mod pcd;
 pub(crate) mod ply;
+pub mod stdio;
 mod xyz;
 
 use crate::core::cloud::PointCloud;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use stdio::{is_stdio, spooled_stdin, write_stdout};
 use thiserror::Error;
 
 /// Point cloud file formats.
@@ -40,6 +42,16 @@ impl Format {
             _ => Err(Problem::UnsupportedExtension(ext)),
         }
     }
+
+    /// The format an input cloud is read in: `given` (`--format`), else what standard input's
+    /// first bytes show for `-`, else the extension's.
+    pub fn of_input(path: &Path, given: Option<Format>) -> Result<Format, Problem> {
+        match given {
+            Some(format) => Ok(format),
+            None if is_stdio(path) => Ok(spooled_stdin()?.1),
+            None => Format::from_path(path),
+        }
+    }
 }
 
 /// How PLY and PCD bodies are written (LAS and XYZ have one encoding each).
@@ -67,6 +79,8 @@ pub enum Problem {
     AllNonFinite(usize),
     #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt, csv or pts; or pass --format)")]
     UnsupportedExtension(String),
+    #[error("standard output has no extension to tell the format: pass --out-format")]
+    StdoutFormat,
     #[error("header declares {declared} points but the file holds only {found}")]
     Truncated { declared: usize, found: usize },
     #[error(
@@ -156,7 +170,8 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
     })
 }
 
-/// Reads a cloud; the format comes from the extension unless `format` is given.
+/// Reads a cloud; the format comes from the extension unless `format` is given. `-` reads
+/// standard input, its format told by its first bytes (see [`stdio`]).
 ///
 /// ```
 /// use mvpcc::io::read_cloud;
@@ -168,6 +183,10 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
 /// ```
 pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIoError> {
     let err = |problem| CloudIoError::new(path, problem);
+    if is_stdio(path) {
+        let (copy, shown) = spooled_stdin().map_err(err)?;
+        return read_cloud(&copy, Some(format.unwrap_or(shown))).map_err(|e| err(e.problem));
+    }
     let format = match format {
         Some(f) => f,
         None => Format::from_path(path).map_err(err)?,
@@ -208,12 +227,16 @@ pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIo
 }
 
 /// Writes a cloud atomically; the format comes from the extension unless `format` is given.
+/// `-` writes standard output, which needs `format`.
 pub fn write_cloud(
     path: &Path,
     cloud: &PointCloud,
     format: Option<Format>,
     encoding: Encoding,
 ) -> Result<(), CloudIoError> {
+    if is_stdio(path) {
+        return write_stdout(cloud, format, encoding);
+    }
     let err = |problem| CloudIoError::new(path, problem);
     let format = match format {
         Some(f) => f,
@@ -233,8 +256,11 @@ pub fn write_cloud(
 }
 
 /// Refuses an output that is one of the inputs (also through symbolic links), and an output whose
-/// directory does not exist.
+/// directory does not exist; standard output (`-`) is neither.
 pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
+    if is_stdio(output) {
+        return Ok(());
+    }
     let err = |problem| CloudIoError::new(output, problem);
     let parent = parent_dir(output);
     if !parent.is_dir() {

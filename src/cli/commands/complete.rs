@@ -13,6 +13,7 @@ use mvpcc::complete::{
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
+use mvpcc::io::stdio::is_stdio;
 use mvpcc::io::{atomic_write, check_output, read_bytes, same_file, write_cloud, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
@@ -157,10 +158,7 @@ fn output_format(args: &CompleteArgs, input: &Path, output: &Path) -> anyhow::Re
         return Ok(f);
     }
     Format::from_path(output)
-        .or_else(|_| match args.input_options.format {
-            Some(f) => Ok(f),
-            None => Format::from_path(input),
-        })
+        .or_else(|_| Format::of_input(input, args.input_options.format))
         .map_err(|e| anyhow!("{}: {e}", output.display()))
 }
 
@@ -285,6 +283,9 @@ fn check_paths(
     args: &CompleteArgs,
 ) -> anyhow::Result<()> {
     check_output(output, &[input])?;
+    if is_stdio(output) && args.json {
+        bail!("-: --json and the completed cloud cannot both go to standard output");
+    }
     if let Some(preview) = &args.preview {
         check_output(preview, &[input])?;
         if same_file(preview, output) {

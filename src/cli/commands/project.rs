@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// MLS formats are z-up; the dataset's own formats are y-up.
 pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
-    match format.or_else(|| Format::from_path(input).ok()) {
+    match Format::of_input(input, format).ok() {
         Some(Format::Las | Format::Laz) => UpAxis::Z,
         _ => UpAxis::Y,
     }

@@ -1,0 +1,133 @@
+//! `-` as a cloud's path: standard input to read, standard output to write.
+//!
+//! The readers take paths (LAZ must seek), so standard input is read to its end into a
+//! temporary file the first time a command asks for it, and every later read of `-` reads that
+//! copy. A cloud for standard output is written whole to a temporary file first and then
+//! copied out, so a write that fails sends nothing rather than half a file.
+
+use super::{write_cloud, CloudIoError, Encoding, Format, Problem};
+use crate::core::cloud::PointCloud;
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, PoisonError};
+use tempfile::{NamedTempFile, TempPath};
+
+/// The path that names standard input or standard output.
+pub const STDIO: &str = "-";
+
+/// Bytes of standard input looked at to tell its format.
+const HEAD: u64 = 4096;
+
+/// Whether `path` names standard input or output rather than a file.
+pub fn is_stdio(path: &Path) -> bool {
+    path.as_os_str() == STDIO
+}
+
+/// Standard input's copy, once made.
+struct Spooled {
+    path: TempPath,
+    format: Format,
+}
+
+static STDIN: Mutex<Option<Spooled>> = Mutex::new(None);
+
+/// Standard input's temporary copy and the format its first bytes show, made on the first call.
+pub(super) fn spooled_stdin() -> Result<(PathBuf, Format), Problem> {
+    let mut slot = STDIN.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(spooled) = slot.as_ref() {
+        return Ok((spooled.path.to_path_buf(), spooled.format));
+    }
+    let mut file = NamedTempFile::new()?;
+    std::io::copy(&mut std::io::stdin().lock(), &mut file)?;
+    file.flush()?;
+    let mut head = Vec::new();
+    File::open(file.path())?.take(HEAD).read_to_end(&mut head)?;
+    let spooled = slot.insert(Spooled {
+        path: file.into_temp_path(),
+        format: Format::sniff(&head),
+    });
+    Ok((spooled.path.to_path_buf(), spooled.format))
+}
+
+/// Deletes standard input's temporary copy, if one was made (statics are never dropped, so
+/// `main` calls this before it exits).
+pub fn release_stdin() {
+    STDIN.lock().unwrap_or_else(PoisonError::into_inner).take();
+}
+
+/// Writes `cloud` to standard output in `format`, which must be given: `-` has no extension.
+pub(super) fn write_stdout(
+    cloud: &PointCloud,
+    format: Option<Format>,
+    encoding: Encoding,
+) -> Result<(), CloudIoError> {
+    let err = |problem| CloudIoError::new(Path::new(STDIO), problem);
+    let format = format.ok_or_else(|| err(Problem::StdoutFormat))?;
+    let dir = tempfile::tempdir().map_err(|e| err(Problem::Io(e)))?;
+    let whole = dir.path().join("cloud");
+    write_cloud(&whole, cloud, Some(format), encoding).map_err(|e| err(e.problem))?;
+    let mut out = std::io::stdout().lock();
+    let copied = File::open(&whole)
+        .and_then(|mut f| std::io::copy(&mut f, &mut out))
+        .and_then(|_| out.flush());
+    match copied {
+        // The reader went away (`| head`): what it did not read it did not want.
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        copied => copied.map_err(|e| err(Problem::Io(e))),
+    }
+}
+
+impl Format {
+    /// The format a file's first bytes show: PLY and LAS by their magic (LAZ by LASzip's bit in
+    /// the point format), PCD by a `VERSION` or `FIELDS` header line, anything else XYZ text.
+    pub fn sniff(head: &[u8]) -> Format {
+        const LAS_POINT_FORMAT: usize = 104;
+        if head.starts_with(b"ply") {
+            return Format::Ply;
+        }
+        if head.starts_with(b"LASF") {
+            let compressed = head.get(LAS_POINT_FORMAT).is_some_and(|&id| id & 0x80 != 0);
+            return if compressed { Format::Laz } else { Format::Las };
+        }
+        let pcd_header = String::from_utf8_lossy(head).lines().any(|line| {
+            let line = line.trim_start();
+            line.starts_with("VERSION") || line.starts_with("FIELDS")
+        });
+        if pcd_header {
+            Format::Pcd
+        } else {
+            Format::Xyz
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_told_by_their_first_bytes() {
+        assert_eq!(Format::sniff(b"ply\nformat ascii 1.0\n"), Format::Ply);
+        assert_eq!(
+            Format::sniff(b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\n"),
+            Format::Pcd
+        );
+        assert_eq!(Format::sniff(b"FIELDS x y z\n"), Format::Pcd);
+        assert_eq!(Format::sniff(b"# x y z\n1 2 3\n"), Format::Xyz);
+        assert_eq!(Format::sniff(b"1,2,3\n"), Format::Xyz);
+        let mut las = b"LASF".to_vec();
+        las.resize(227, 0);
+        assert_eq!(Format::sniff(&las), Format::Las);
+        las[104] = 0x83;
+        assert_eq!(Format::sniff(&las), Format::Laz);
+        assert_eq!(Format::sniff(b"LASF"), Format::Las);
+    }
+
+    #[test]
+    fn only_a_lone_dash_is_standard_io() {
+        assert!(is_stdio(Path::new("-")));
+        assert!(!is_stdio(Path::new("./-")));
+        assert!(!is_stdio(Path::new("-.ply")));
+    }
+}

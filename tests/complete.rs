@@ -869,3 +869,56 @@ fn a_dash_reads_standard_input_and_writes_standard_output() {
     assert_eq!(std::fs::read(dir.path().join("-")).unwrap(), piped);
     assert!(!refused.exists());
 }
+
+#[cfg(unix)]
+#[test]
+fn a_pipe_is_written_into_a_link_keeps_its_file_and_a_folder_is_refused() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = TempDir::new().unwrap();
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example/car_partial.ply");
+    let mirror = |output: &Path, extra: &[&str]| {
+        mvpcc()
+            .args(["complete", s(&input), s(output), "--method", "mirror"])
+            .args(extra)
+            .assert()
+            .success();
+    };
+    // Renaming a finished file over a pipe (or, run as root, over /dev/null) would replace it.
+    let fifo = dir.path().join("fifo");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap())
+    };
+    mirror(&fifo, &["--out-format", "las"]);
+    // Before joining: had the pipe been replaced, its reader would wait for ever.
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+    let through_pipe = reader.join().unwrap();
+    let file = dir.path().join("file.las");
+    mirror(&file, &[]);
+    assert_eq!(through_pipe, std::fs::read(&file).unwrap());
+
+    let target = dir.path().join("target.ply");
+    std::fs::write(&target, b"old").unwrap();
+    let link = dir.path().join("link.ply");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    mirror(&link, &[]);
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(!read_cloud(&target, None).unwrap().cloud.is_empty());
+
+    mvpcc()
+        .args(["complete", s(&input), s(dir.path())])
+        .assert()
+        .failure()
+        .stderr(format!(
+            "error: {}: is a directory; name the output file\n",
+            dir.path().display()
+        ));
+}

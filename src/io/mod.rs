@@ -71,6 +71,8 @@ pub enum Problem {
     NotFound,
     #[error("is a directory, not a point cloud file")]
     IsDirectory,
+    #[error("is a directory; name the output file")]
+    OutputIsDirectory,
     #[error("file is empty")]
     EmptyFile,
     #[error("contains no points")]
@@ -243,7 +245,7 @@ pub fn write_cloud(
         None => Format::from_path(path).map_err(err)?,
     };
     match format {
-        Format::Las | Format::Laz => las::write(path, cloud, format == Format::Laz),
+        Format::Las | Format::Laz => write_las(path, cloud, format == Format::Laz),
         Format::Ply => {
             atomic_write(path, |w| ply::write(w, cloud, encoding)).map_err(write_problem)
         }
@@ -255,13 +257,16 @@ pub fn write_cloud(
     .map_err(err)
 }
 
-/// Refuses an output that is one of the inputs (also through symbolic links), and an output whose
-/// directory does not exist; standard output (`-`) is neither.
+/// Refuses an output that is one of the inputs (also through symbolic links), a directory, and an
+/// output whose directory does not exist; standard output (`-`) is none of them.
 pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
     if is_stdio(output) {
         return Ok(());
     }
     let err = |problem| CloudIoError::new(output, problem);
+    if output.is_dir() {
+        return Err(err(Problem::OutputIsDirectory));
+    }
     let parent = parent_dir(output);
     if !parent.is_dir() {
         return Err(err(Problem::NoOutputDirectory(parent)));
@@ -296,20 +301,66 @@ pub fn resolved(path: &Path) -> PathBuf {
     }
 }
 
+/// What writing to a path means.
+enum Destination {
+    /// A file replaced whole: the path itself, or through links the file they name (the links
+    /// stay).
+    File(PathBuf),
+    /// A device, pipe or socket (`/dev/null`, `/dev/stdout`, a shell's `>(…)`): written into,
+    /// never replaced by a file.
+    Stream,
+}
+
+fn destination(path: &Path) -> Destination {
+    match std::fs::metadata(path) {
+        Ok(meta) if meta.is_file() => {
+            Destination::File(std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()))
+        }
+        Ok(meta) if !meta.is_dir() => Destination::Stream,
+        _ => Destination::File(path.to_path_buf()),
+    }
+}
+
 /// Writes through `body` into a temporary file beside `path`, then renames it over `path`, so a
-/// failed or interrupted write never leaves a half-written output.
+/// failed or interrupted write never leaves a half-written output. A device, pipe or socket is
+/// written into instead.
 pub fn atomic_write<F>(path: &Path, body: F) -> std::io::Result<()>
 where
     F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
 {
-    let tmp = temp_file_beside(path)?;
+    let file = match destination(path) {
+        Destination::File(file) => file,
+        Destination::Stream => {
+            let stream = File::options().write(true).open(path)?;
+            let mut w = BufWriter::with_capacity(1 << 20, &stream);
+            body(&mut w)?;
+            return w.flush();
+        }
+    };
+    let tmp = temp_file_beside(&file)?;
     {
         let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file());
         body(&mut w)?;
         w.flush()?;
     }
-    tmp.persist(path).map_err(|e| e.error)?;
+    tmp.persist(&file).map_err(|e| e.error)?;
     Ok(())
+}
+
+/// LAS/LAZ, whose writer seeks back to its header: into a device, pipe or socket it is written
+/// whole to a temporary file first and then copied.
+fn write_las(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Problem> {
+    match destination(path) {
+        Destination::File(file) => las::write(&file, cloud, compressed),
+        Destination::Stream => {
+            let dir = tempfile::tempdir()?;
+            let whole = dir.path().join("cloud.las");
+            las::write(&whole, cloud, compressed)?;
+            let mut stream = File::options().write(true).open(path)?;
+            std::io::copy(&mut File::open(&whole)?, &mut stream)?;
+            Ok(())
+        }
+    }
 }
 
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),

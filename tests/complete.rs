@@ -922,3 +922,25 @@ fn a_pipe_is_written_into_a_link_keeps_its_file_and_a_folder_is_refused() {
             dir.path().display()
         ));
 }
+
+#[test]
+fn a_preview_is_a_jpeg_when_its_name_says_so() {
+    let dir = TempDir::new().unwrap();
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example/car_partial.ply");
+    for (name, magic) in [
+        ("p.png", &b"\x89PNG"[..]),
+        ("p.JPG", &b"\xFF\xD8\xFF"[..]),
+        ("p.jpeg", &b"\xFF\xD8\xFF"[..]),
+    ] {
+        let preview = dir.path().join(name);
+        mvpcc()
+            .args(["complete", s(&input), s(&dir.path().join("o.ply"))])
+            .args(["--method", "mirror", "--preview", s(&preview)])
+            .assert()
+            .success();
+        assert!(
+            std::fs::read(&preview).unwrap().starts_with(magic),
+            "{name}"
+        );
+    }
+}

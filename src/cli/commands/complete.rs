@@ -392,9 +392,12 @@ fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::
         plane: done.plane.map(|p| p.offset),
     };
     let img = render(&left, &right);
+    let format = match image::ImageFormat::from_path(path) {
+        Ok(image::ImageFormat::Jpeg) => image::ImageFormat::Jpeg,
+        _ => image::ImageFormat::Png,
+    };
     atomic_write(path, |w| {
-        img.write_to(w, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
+        img.write_to(w, format).map_err(std::io::Error::other)
     })
     .with_context(|| format!("{}: cannot write the preview", path.display()))
 }

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 fn main() -> ExitCode {
     let cli = Cli::parse_negatives();
     let result = cli::commands::run(cli);
-    mvpcc::io::stdio::release_stdin();
+    mvpcc::io::stdio::release_spooled();
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

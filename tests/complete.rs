@@ -872,7 +872,7 @@ fn a_dash_reads_standard_input_and_writes_standard_output() {
 
 #[cfg(unix)]
 #[test]
-fn a_pipe_is_written_into_a_link_keeps_its_file_and_a_folder_is_refused() {
+fn pipes_are_read_and_written_a_link_keeps_its_file_and_a_folder_is_refused() {
     use std::os::unix::fs::FileTypeExt;
     let dir = TempDir::new().unwrap();
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example/car_partial.ply");
@@ -901,6 +901,21 @@ fn a_pipe_is_written_into_a_link_keeps_its_file_and_a_folder_is_refused() {
     let file = dir.path().join("file.las");
     mirror(&file, &[]);
     assert_eq!(through_pipe, std::fs::read(&file).unwrap());
+    // A pipe as the input (a shell's `<(…)`), its format told by its first bytes.
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::write(fifo, through_pipe).unwrap())
+    };
+    let from_pipe = dir.path().join("from_pipe.las");
+    mvpcc()
+        .args(["complete", s(&fifo), s(&from_pipe), "--method", "identity"])
+        .assert()
+        .success();
+    writer.join().unwrap();
+    assert_eq!(
+        read_cloud(&from_pipe, None).unwrap().cloud.positions,
+        read_cloud(&file, None).unwrap().cloud.positions
+    );
 
     let target = dir.path().join("target.ply");
     std::fs::write(&target, b"old").unwrap();

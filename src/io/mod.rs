@@ -12,7 +12,7 @@ use crate::core::cloud::PointCloud;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use stdio::{is_stdio, spooled_stdin, write_stdout};
+use stdio::{is_stdio, is_stream, spooled, write_stdout};
 use thiserror::Error;
 
 /// Point cloud file formats.
@@ -43,13 +43,16 @@ impl Format {
         }
     }
 
-    /// The format an input cloud is read in: `given` (`--format`), else what standard input's
-    /// first bytes show for `-`, else the extension's.
+    /// The format an input cloud is read in: `given` (`--format`), else the extension's, else
+    /// for standard input or another stream what its first bytes show.
     pub fn of_input(path: &Path, given: Option<Format>) -> Result<Format, Problem> {
-        match given {
-            Some(format) => Ok(format),
-            None if is_stdio(path) => Ok(spooled_stdin()?.1),
-            None => Format::from_path(path),
+        if let Some(format) = given {
+            return Ok(format);
+        }
+        match Format::from_path(path) {
+            Ok(format) if !is_stdio(path) => Ok(format),
+            _ if is_stream(path) => Ok(spooled(path)?.1),
+            named => named,
         }
     }
 }
@@ -173,7 +176,7 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
 }
 
 /// Reads a cloud; the format comes from the extension unless `format` is given. `-` reads
-/// standard input, its format told by its first bytes (see [`stdio`]).
+/// standard input, and a pipe or device is read like it (see [`stdio`]).
 ///
 /// ```
 /// use mvpcc::io::read_cloud;
@@ -185,9 +188,10 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
 /// ```
 pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIoError> {
     let err = |problem| CloudIoError::new(path, problem);
-    if is_stdio(path) {
-        let (copy, shown) = spooled_stdin().map_err(err)?;
-        return read_cloud(&copy, Some(format.unwrap_or(shown))).map_err(|e| err(e.problem));
+    if is_stream(path) {
+        let format = Format::of_input(path, format).map_err(err)?;
+        let (copy, _) = spooled(path).map_err(err)?;
+        return read_cloud(&copy, Some(format)).map_err(|e| err(e.problem));
     }
     let format = match format {
         Some(f) => f,

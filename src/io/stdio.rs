@@ -1,9 +1,11 @@
-//! `-` as a cloud's path: standard input to read, standard output to write.
+//! `-` as a cloud's path, and inputs that are streams rather than files.
 //!
-//! The readers take paths (LAZ must seek), so standard input is read to its end into a
-//! temporary file the first time a command asks for it, and every later read of `-` reads that
-//! copy. A cloud for standard output is written whole to a temporary file first and then
-//! copied out, so a write that fails sends nothing rather than half a file.
+//! The readers take paths (LAZ must seek), so standard input (`-`), or a pipe or device named
+//! as an input (`<(…)`, `/dev/stdin`), is read to its end into a temporary file the first time
+//! a command asks for it, and every later read of it reads that copy; its format comes from its
+//! first bytes unless its name has a known extension. A cloud for standard output is written
+//! whole to a temporary file first and then copied out, so a write that fails sends nothing
+//! rather than half a file.
 
 use super::{write_cloud, CloudIoError, Encoding, Format, Problem};
 use crate::core::cloud::PointCloud;
@@ -16,7 +18,7 @@ use tempfile::{NamedTempFile, TempPath};
 /// The path that names standard input or standard output.
 pub const STDIO: &str = "-";
 
-/// Bytes of standard input looked at to tell its format.
+/// Bytes of a stream looked at to tell its format.
 const HEAD: u64 = 4096;
 
 /// Whether `path` names standard input or output rather than a file.
@@ -24,36 +26,54 @@ pub fn is_stdio(path: &Path) -> bool {
     path.as_os_str() == STDIO
 }
 
-/// Standard input's copy, once made.
+/// Whether an input `path` is read as a stream: standard input, or a pipe, device or socket.
+pub(super) fn is_stream(path: &Path) -> bool {
+    is_stdio(path) || std::fs::metadata(path).is_ok_and(|meta| !meta.is_file() && !meta.is_dir())
+}
+
+/// A stream's copy, once made.
 struct Spooled {
-    path: TempPath,
+    source: PathBuf,
+    copy: TempPath,
     format: Format,
 }
 
-static STDIN: Mutex<Option<Spooled>> = Mutex::new(None);
+static SPOOLED: Mutex<Vec<Spooled>> = Mutex::new(Vec::new());
 
-/// Standard input's temporary copy and the format its first bytes show, made on the first call.
-pub(super) fn spooled_stdin() -> Result<(PathBuf, Format), Problem> {
-    let mut slot = STDIN.lock().unwrap_or_else(PoisonError::into_inner);
-    if let Some(spooled) = slot.as_ref() {
-        return Ok((spooled.path.to_path_buf(), spooled.format));
+/// The temporary copy of the stream `path` names and the format its first bytes show, made on
+/// the first call for that path.
+pub(super) fn spooled(path: &Path) -> Result<(PathBuf, Format), Problem> {
+    let mut spools = SPOOLED.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(s) = spools.iter().find(|s| s.source == path) {
+        return Ok((s.copy.to_path_buf(), s.format));
     }
     let mut file = NamedTempFile::new()?;
-    std::io::copy(&mut std::io::stdin().lock(), &mut file)?;
+    if is_stdio(path) {
+        std::io::copy(&mut std::io::stdin().lock(), &mut file)?;
+    } else {
+        std::io::copy(&mut File::open(path)?, &mut file)?;
+    }
     file.flush()?;
     let mut head = Vec::new();
     File::open(file.path())?.take(HEAD).read_to_end(&mut head)?;
-    let spooled = slot.insert(Spooled {
-        path: file.into_temp_path(),
-        format: Format::sniff(&head),
+    let format = Format::sniff(&head);
+    let copy = file.into_temp_path();
+    let found = (copy.to_path_buf(), format);
+    spools.push(Spooled {
+        source: path.to_path_buf(),
+        copy,
+        format,
     });
-    Ok((spooled.path.to_path_buf(), spooled.format))
+    Ok(found)
 }
 
-/// Deletes standard input's temporary copy, if one was made (statics are never dropped, so
-/// `main` calls this before it exits).
-pub fn release_stdin() {
-    STDIN.lock().unwrap_or_else(PoisonError::into_inner).take();
+/// Deletes the streams' temporary copies (statics are never dropped, so `main` calls this
+/// before it exits).
+pub fn release_spooled() {
+    SPOOLED
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clear();
 }
 
 /// Writes `cloud` to standard output in `format`, which must be given: `-` has no extension.

@@ -450,6 +450,33 @@ fn bad_inputs_fail_cleanly() {
 }
 
 #[test]
+fn an_output_folder_held_by_a_file_is_refused_by_every_command() {
+    let dir = TempDir::new().unwrap();
+    let good = write(&dir, "good.ply", &car());
+    let file = write_bytes(&dir, "taken", b"not a folder");
+    let f = s(&file);
+    let data = dir.path().join("no-data");
+    let commands: [&[&str]; 6] = [
+        &["synth", "--count", "1", "--out", f],
+        &["prepare", "--synth", "1", "--out", f],
+        &["project", s(&good), f],
+        &["train", "--data", s(&data), "--out", f],
+        &["train-orient", "--data", s(&data), "--out", f],
+        &["complete", "--input-dir", s(dir.path()), "--output-dir", f],
+    ];
+    for args in commands {
+        let assert = mvpcc().args(args).assert().failure();
+        let stderr = String::from_utf8(assert.get_output().stderr.clone()).unwrap();
+        assert_eq!(
+            stderr,
+            format!("error: {f}: exists and is not a directory\n"),
+            "{args:?}"
+        );
+        assert_eq!(std::fs::read(&file).unwrap(), b"not a folder");
+    }
+}
+
+#[test]
 fn read_only_output_directory_fails_without_partial_files() {
     let dir = TempDir::new().unwrap();
     let good = write(&dir, "good.ply", &car());

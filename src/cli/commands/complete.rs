@@ -557,6 +557,7 @@ fn batch_entry(
 fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result<()> {
     let output_dir = args.output_dir.as_deref().expect("clap requires it");
     let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
+    super::check_out_dir(output_dir)?;
     let files = batch_files(&root, output_dir, args)?;
     std::fs::create_dir_all(output_dir)
         .with_context(|| format!("{}: cannot create", output_dir.display()))?;

@@ -12,6 +12,7 @@ mod train;
 mod train_orient;
 
 use crate::cli::args::{Cli, Command};
+use anyhow::bail;
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::io::{read_cloud, Format};
 use mvpcc::model::device::{open, DeviceChoice, Opened};
@@ -110,4 +111,12 @@ pub(crate) fn progress(len: usize, label: &str, log: Log) -> indicatif::Progress
         .expect("a valid progress template"),
     );
     bar
+}
+
+/// Refuses an output folder whose name a file already holds, before any work is done.
+pub(crate) fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        bail!("{}: exists and is not a directory", dir.display());
+    }
+    Ok(())
 }

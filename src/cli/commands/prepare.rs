@@ -278,9 +278,7 @@ fn claim(out: &Path, params: &PrepareParams) -> anyhow::Result<()> {
 pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     let params = params(&args)?;
     let out = &args.out;
-    if out.exists() && !out.is_dir() {
-        bail!("{}: exists and is not a directory", out.display());
-    }
+    super::check_out_dir(out)?;
     let (meshes, mut sources, mut skipped) = find_meshes(&args, log)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     claim(out, &params)?;

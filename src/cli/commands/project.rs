@@ -1,6 +1,6 @@
 use super::{load, Log};
 use crate::cli::args::ProjectArgs;
-use anyhow::{bail, Context};
+use anyhow::Context;
 use mvpcc::core::camera::Camera;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::Format;
@@ -19,9 +19,7 @@ pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
 pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = Camera::set(&args.views.0, args.size)?;
     let outdir = &args.outdir;
-    if outdir.exists() && !outdir.is_dir() {
-        bail!("{}: exists and is not a directory", outdir.display());
-    }
+    super::check_out_dir(outdir)?;
     let cloud = load(&args.input, args.input_options.format, log)?;
     let up = args
         .up

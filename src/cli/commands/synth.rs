@@ -63,9 +63,7 @@ pub(super) fn generate(
     preview: bool,
     log: Log,
 ) -> anyhow::Result<SynthManifest> {
-    if out.exists() && !out.is_dir() {
-        bail!("{}: exists and is not a directory", out.display());
-    }
+    super::check_out_dir(out)?;
     let manifest_path = out.join(SYNTH_FILE);
     if let Some(done) = already_generated(&manifest_path, count, categories, seed) {
         log.info(format!(

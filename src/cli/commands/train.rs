@@ -269,6 +269,7 @@ fn default_run(data: &Path) -> PathBuf {
 
 pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     let run = args.out.clone().unwrap_or_else(|| default_run(&args.data));
+    super::check_out_dir(&run)?;
     let (settings, model) = resolve(&args, &run)?;
     let opened = super::open_device(args.device, log)?;
     log.info(format!(

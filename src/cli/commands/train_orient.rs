@@ -18,8 +18,9 @@ pub const WEIGHTS_FILE: &str = "orienter.safetensors";
 
 pub(super) fn run(args: TrainOrientArgs, log: Log) -> anyhow::Result<()> {
     let (config, settings) = settings(&args)?;
-    let data = OrientData::scan(&args.data)?;
     let out = output_dir(&args)?;
+    let data = OrientData::scan(&args.data)?;
+    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
     write_file(
         &out.join("config.json"),
         serde_json::to_string_pretty(&config)?.as_bytes(),
@@ -118,8 +119,8 @@ fn monitor(
     }
 }
 
-/// The run's directory (`--out`, or `runs/orient-<data>`), created; refused when it already
-/// holds a trained network.
+/// The run's directory (`--out`, or `runs/orient-<data>`); refused when a file holds its name
+/// or it already holds a trained network.
 fn output_dir(args: &TrainOrientArgs) -> anyhow::Result<PathBuf> {
     let out = args.out.clone().unwrap_or_else(|| {
         let name = args
@@ -128,13 +129,13 @@ fn output_dir(args: &TrainOrientArgs) -> anyhow::Result<PathBuf> {
             .map_or("data".into(), |n| n.to_string_lossy().into_owned());
         PathBuf::from("runs").join(format!("orient-{name}"))
     });
+    super::check_out_dir(&out)?;
     if out.join(WEIGHTS_FILE).exists() {
         anyhow::bail!(
             "{}: already holds {WEIGHTS_FILE}; choose another --out",
             out.display()
         );
     }
-    std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
     Ok(out)
 }
 

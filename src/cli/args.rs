@@ -236,10 +236,11 @@ impl std::fmt::Display for ViewList {
 
 #[derive(Debug, Args)]
 pub struct CompleteArgs {
-    /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ).
+    /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ; `-`: standard input).
     #[arg(required_unless_present_any = ["input_dir", "list"], conflicts_with_all = ["input_dir", "list"])]
     pub input: Option<PathBuf>,
-    /// Completed cloud; its extension picks the format (the input's format when it names none).
+    /// Completed cloud; its extension picks the format (the input's format when it names none;
+    /// `-`: standard output).
     #[arg(required_unless_present_any = ["input_dir", "list"])]
     pub output: Option<PathBuf>,
     /// Complete every cloud file under this directory (recursively; hidden files skipped, each
@@ -402,7 +403,7 @@ pub struct CompleteArgs {
 
 #[derive(Debug, Args)]
 pub struct ProjectArgs {
-    /// Input cloud (PLY, PCD, LAS/LAZ, XYZ).
+    /// Input cloud (PLY, PCD, LAS/LAZ, XYZ; `-`: standard input).
     pub input: PathBuf,
     /// Directory for the view images and frame.json (created if missing).
     pub outdir: PathBuf,
@@ -423,7 +424,7 @@ pub struct ProjectArgs {
 pub struct ReprojectArgs {
     /// Directory of view images (as written by `mvpcc project`, or the original dataset's).
     pub viewdir: PathBuf,
-    /// Output cloud.
+    /// Output cloud (`-`: standard output, with --out-format).
     pub output: PathBuf,
     /// Rig cameras to use [default: every locations_NNN.png found].
     #[arg(long)]
@@ -449,9 +450,9 @@ pub struct ReprojectArgs {
 
 #[derive(Debug, Args)]
 pub struct FilterArgs {
-    /// Input cloud.
+    /// Input cloud (`-`: standard input).
     pub input: PathBuf,
-    /// Output cloud (inliers, with all their attributes).
+    /// Output cloud (inliers, with all their attributes; `-`: standard output, with --out-format).
     pub output: PathBuf,
     #[command(flatten)]
     pub sor: SorOptions,

@@ -1,5 +1,6 @@
 //! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
-//! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it.
+//! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it (a
+//! device or pipe is written into instead). `-` is standard input or output ([`stdio`]).
 
 pub mod batch;
 mod las;

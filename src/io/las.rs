@@ -440,7 +440,5 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         }
         writer.close().map_err(las_problem)?;
     }
-    tmp.persist(path)
-        .map_err(|e| super::write_problem(e.error))?;
-    Ok(())
+    super::persist(tmp, path).map_err(super::write_problem)
 }

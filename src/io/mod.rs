@@ -348,8 +348,16 @@ where
         body(&mut w)?;
         w.flush()?;
     }
-    tmp.persist(&file).map_err(|e| e.error)?;
-    Ok(())
+    persist(tmp, &file)
+}
+
+/// Renames a finished temporary file over `file`, which keeps the permissions it had (a new
+/// file gets those of an ordinary new file).
+fn persist(tmp: tempfile::NamedTempFile, file: &Path) -> std::io::Result<()> {
+    if let Ok(meta) = std::fs::metadata(file) {
+        tmp.as_file().set_permissions(meta.permissions())?;
+    }
+    tmp.persist(file).map(drop).map_err(|e| e.error)
 }
 
 /// LAS/LAZ, whose writer seeks back to its header: into a device, pipe or socket it is written
@@ -397,6 +405,23 @@ fn fits_f32(cloud: &PointCloud) -> bool {
 mod tests {
     use super::*;
     use crate::core::cloud::{Attribute, ScalarKind};
+
+    #[cfg(unix)]
+    #[test]
+    fn a_replaced_output_keeps_its_permissions() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let cloud = colored_cloud(false);
+        for name in ["kept.ply", "kept.las"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, b"old").unwrap();
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o640)).unwrap();
+            write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+            assert_eq!(mode & 0o777, 0o640, "{name}");
+            assert_eq!(read_cloud(&path, None).unwrap().cloud.len(), cloud.len());
+        }
+    }
 
     fn colored_cloud(georeferenced: bool) -> PointCloud {
         let base = if georeferenced {

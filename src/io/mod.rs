@@ -13,7 +13,7 @@ use crate::core::cloud::PointCloud;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use stdio::{is_stdio, is_stream, spooled, write_stdout};
+use stdio::{is_stdio, is_stream, spooled, write_stdout, write_whole_into};
 use thiserror::Error;
 
 /// Point cloud file formats.
@@ -366,12 +366,9 @@ fn write_las(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Pr
     match destination(path) {
         Destination::File(file) => las::write(&file, cloud, compressed),
         Destination::Stream => {
-            let dir = tempfile::tempdir()?;
-            let whole = dir.path().join("cloud.las");
-            las::write(&whole, cloud, compressed)?;
+            let format = if compressed { Format::Laz } else { Format::Las };
             let mut stream = File::options().write(true).open(path)?;
-            std::io::copy(&mut File::open(&whole)?, &mut stream)?;
-            Ok(())
+            write_whole_into(&mut stream, cloud, format, Encoding::Binary)
         }
     }
 }

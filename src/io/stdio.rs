@@ -84,18 +84,27 @@ pub(super) fn write_stdout(
 ) -> Result<(), CloudIoError> {
     let err = |problem| CloudIoError::new(Path::new(STDIO), problem);
     let format = format.ok_or_else(|| err(Problem::StdoutFormat))?;
-    let dir = tempfile::tempdir().map_err(|e| err(Problem::Io(e)))?;
-    let whole = dir.path().join("cloud");
-    write_cloud(&whole, cloud, Some(format), encoding).map_err(|e| err(e.problem))?;
-    let mut out = std::io::stdout().lock();
-    let copied = File::open(&whole)
-        .and_then(|mut f| std::io::copy(&mut f, &mut out))
-        .and_then(|_| out.flush());
-    match copied {
+    match write_whole_into(&mut std::io::stdout().lock(), cloud, format, encoding) {
         // The reader went away (`| head`): what it did not read it did not want.
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        copied => copied.map_err(|e| err(Problem::Io(e))),
+        Err(Problem::Io(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        written => written.map_err(err),
     }
+}
+
+/// Writes `cloud` whole to a temporary file, then copies it into `out` (standard output, or a
+/// pipe that LAS's writer cannot seek in), so a write that fails sends nothing.
+pub(super) fn write_whole_into(
+    out: &mut impl Write,
+    cloud: &PointCloud,
+    format: Format,
+    encoding: Encoding,
+) -> Result<(), Problem> {
+    let dir = tempfile::tempdir()?;
+    let whole = dir.path().join("cloud");
+    write_cloud(&whole, cloud, Some(format), encoding).map_err(|e| e.problem)?;
+    std::io::copy(&mut File::open(&whole)?, out)?;
+    out.flush()?;
+    Ok(())
 }
 
 impl Format {

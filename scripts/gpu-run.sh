@@ -11,6 +11,7 @@
 #   --bin FILE        mvpcc built with --features cuda,wgpu, plain or .xz (scripts/build-cuda.sh)
 #                     [target/cuda-dist/mvpcc.xz]
 #   --minutes M       wall-clock budget of the whole script, minutes [9]
+#   --profile-seconds S  the profiles' share of it: none starts after S seconds [150]
 #   --objects N       procedural vehicles to train on (prepare --synth) [6000]
 #   --seed N          their seed; each leg should draw new ones [the date, YYYYMMDD]
 #   --init PATH|none  weights the leg starts from (train --init) [assets]
@@ -28,11 +29,12 @@
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
 # `*_ms_median=` lines of every profile, mvpcc and PyTorch), train.json (the run's summary),
 # run.tar.xz.part-* (the run directory without checkpoints: weights, config, log.jsonl,
-# losses.png, samples/). Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
+# losses.png, samples/, and best/ with the weights of the best validation, optimizers left out). Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
 set -uo pipefail
 
 bin=target/cuda-dist/mvpcc.xz
 minutes=9
+profile_seconds=150
 objects=6000
 seed=$(date +%Y%m%d)
 init=assets
@@ -47,6 +49,7 @@ while [ $# -gt 1 ]; do
     case $1 in
     --bin) bin=$2 ;;
     --minutes) minutes=$2 ;;
+    --profile-seconds) profile_seconds=$2 ;;
     --objects) objects=$2 ;;
     --seed) seed=$2 ;;
     --init) init=$2 ;;
@@ -72,7 +75,8 @@ out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 work=$(mktemp -d /tmp/mvpcc-gpu-run.XXXXXX)
-deadline=$(($(date +%s) + minutes * 60))
+start=$(date +%s)
+deadline=$((start + minutes * 60))
 log=$out/run.log
 profiles=$out/profiles.txt
 : >"$log"
@@ -95,7 +99,7 @@ patience_args=()
 if $tiny; then
     device=cpu objects=16 split=0.67 size=32 gt_size=64 batch=2 workers=1 val_every=5 runs=1
     warmup=0
-    config=tiny init=none margin=20 patience_args=(--patience 1000)
+    config=tiny init=none margin=20 patience_args=(--patience 1000) profile_seconds=100000
     [ "$minutes" -gt 3 ] && minutes=3 && deadline=$(($(date +%s) + 180))
 fi
 
@@ -110,10 +114,16 @@ step() {
     [ $status -eq 0 ] || say "exit status $status"
     return $status
 }
-# A profile's last line, `<what>_ms_median=<ms>`, with what was profiled.
+# A profile's last line, `<what>_ms_median=<ms>`, with what was profiled. The profiles run in
+# the order of what matters most, and none starts once their share of the time is spent: the
+# leg gets the rest whatever a slow kernel compilation costs.
 profile() {
     local label=$1
     shift
+    if [ $(($(date +%s) - start)) -ge "$profile_seconds" ]; then
+        echo "$label skipped (the profiles' $profile_seconds s were spent)" >>"$profiles"
+        return
+    fi
     if step 150 "$@"; then
         echo "$label $(grep '_ms_median=' "$log" | tail -1)" >>"$profiles"
     else
@@ -139,7 +149,9 @@ if command -v nvidia-smi >/dev/null; then
 fi
 # A Vulkan loader for wgpu, when the caller carried one (docs/gpu.md), and the driver's own
 # Vulkan and EGL manifests where the loader would not find them.
+vulkan=false
 if ls .gl/*.deb >/dev/null 2>&1; then
+    vulkan=true
     for f in .gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
     icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
@@ -161,38 +173,48 @@ prepare=$!
 if $tiny; then
     devices=(cpu) step_configs=(tiny) forward_configs=(tiny) torch_device=cpu profile_batch=2
 else
-    devices=(cuda wgpu) step_configs=(small cpu) forward_configs=(paper) torch_device=cuda
+    devices=(cuda) step_configs=(small cpu) forward_configs=(paper) torch_device=cuda
     profile_batch=16
+    $vulkan && devices+=(wgpu)
 fi
 timing=(--runs "$runs" --warmup "$warmup")
-for config in "${step_configs[@]}"; do
-    for d in "${devices[@]}"; do
-        profile "mvpcc $d $config train step, batch $profile_batch:" "$mvpcc" profile \
-            "${timing[@]}" --device "$d" --config "$config" --train --batch "$profile_batch"
-    done
-    profile "mvpcc ${devices[0]} $config train step, batch $profile_batch, sliced layers:" \
-        "$mvpcc" profile "${timing[@]}" --device "${devices[0]}" --config "$config" --train \
-        --batch "$profile_batch" --layers sliced
-done
-for config in "${forward_configs[@]}"; do
-    for d in "${devices[@]}"; do
-        profile "mvpcc $d $config forward, batch 1:" "$mvpcc" profile "${timing[@]}" \
-            --device "$d" --config "$config"
-    done
-done
 torch=benches/reference/generator_torch.py
-if python3 -c 'import torch' 2>/dev/null; then
-    for config in "${step_configs[@]}"; do
-        profile "torch $torch_device $config train step, batch $profile_batch:" python3 "$torch" \
-            "${timing[@]}" --device "$torch_device" --config "$config" --train --batch "$profile_batch"
+have_torch=false
+python3 -c 'import torch' 2>/dev/null && have_torch=true || say "no PyTorch here: its profiles are skipped"
+step_profile() {
+    profile "mvpcc $1 $2 train step, batch $profile_batch$3:" "$mvpcc" profile "${timing[@]}" \
+        --device "$1" --config "$2" --train --batch "$profile_batch" "${@:4}"
+}
+forward_profile() {
+    profile "mvpcc $1 $2 forward, batch 1:" "$mvpcc" profile "${timing[@]}" --device "$1" \
+        --config "$2"
+}
+torch_step_profile() {
+    $have_torch && profile "torch $torch_device $1 train step, batch $profile_batch:" python3 \
+        "$torch" "${timing[@]}" --device "$torch_device" --config "$1" --train --batch "$profile_batch"
+}
+torch_forward_profile() {
+    $have_torch && profile "torch $torch_device $1 forward, batch 1:" python3 "$torch" \
+        "${timing[@]}" --device "$torch_device" --config "$1"
+}
+# Each mvpcc figure beside PyTorch's, the first device's (CUDA's) first; the sliced layers and
+# the other devices after them.
+for c in "${step_configs[@]}"; do
+    step_profile "${devices[0]}" "$c" ""
+    torch_step_profile "$c"
+    [ "$c" = "${step_configs[0]}" ] || continue
+    for f in "${forward_configs[@]}"; do
+        forward_profile "${devices[0]}" "$f"
+        torch_forward_profile "$f"
     done
-    for config in "${forward_configs[@]}"; do
-        profile "torch $torch_device $config forward, batch 1:" python3 "$torch" "${timing[@]}" \
-            --device "$torch_device" --config "$config"
-    done
-else
-    say "no PyTorch here: its profiles are skipped"
-fi
+done
+for c in "${step_configs[@]}"; do
+    step_profile "${devices[0]}" "$c" ", sliced layers" --layers sliced
+done
+for d in "${devices[@]:1}"; do
+    for c in "${step_configs[@]}"; do step_profile "$d" "$c" ""; done
+    for f in "${forward_configs[@]}"; do forward_profile "$d" "$f"; done
+done
 
 say "waiting for the data"
 wait $prepare || { say "prepare failed"; exit 1; }
@@ -222,7 +244,7 @@ status=$?
 # Packed before the timings below, so that a command stopped at its limit still brings the
 # leg back.
 say "packing"
-tar -C "$run" --exclude checkpoints --exclude best -cf - . | xz_stream |
+tar -C "$run" --exclude checkpoints --exclude 'best/*.bpk' -cf - . | xz_stream |
     split -b 15M - "$out/run.tar.xz.part-"
 
 # The network's share of `complete` (encoder, fusion, decoder), median over the files after

@@ -28,17 +28,27 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     ] {
         assert!(profiles.contains(line), "no {line:?} in {profiles}");
     }
-    // The built-in model completes every file; the leg's, briefly trained, is timed on the
-    // files it completes (the count of failed ones is reported, not hidden).
+    // The built-in model completes every file, in the default and the paper's pipeline; the
+    // leg's, briefly trained, is timed on the files it completes (the count of failed ones is
+    // reported, not hidden). Each `complete --json` report comes back whole.
     let completions: Vec<&str> = profiles
         .lines()
         .filter(|l| l.starts_with("mvpcc complete, model"))
         .collect();
-    assert_eq!(completions.len(), 2, "{profiles}\n{log}");
-    assert!(
-        completions[0].contains("built-in, 9 files completed, 0 failed: network_ms_median="),
-        "{profiles}\n{log}"
-    );
+    assert_eq!(completions.len(), 3, "{profiles}\n{log}");
+    for (line, model) in [(0, "built-in"), (2, "built-in, --paper")] {
+        assert!(
+            completions[line]
+                .contains(&format!("{model}, 9 files completed, 0 failed: network_ms_median=")),
+            "{profiles}\n{log}"
+        );
+    }
+    for name in ["built-in", "leg", "paper"] {
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join(format!("complete-{name}.json"))).unwrap())
+                .unwrap();
+        assert_eq!(report["results"].as_array().unwrap().len(), 9, "{name}: {report}");
+    }
 
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap())

@@ -38,16 +38,22 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     assert_eq!(completions.len(), 3, "{profiles}\n{log}");
     for (line, model) in [(0, "built-in"), (2, "built-in, --paper")] {
         assert!(
-            completions[line]
-                .contains(&format!("{model}, 9 files completed, 0 failed: network_ms_median=")),
+            completions[line].contains(&format!(
+                "{model}, 9 files completed, 0 failed: network_ms_median="
+            )),
             "{profiles}\n{log}"
         );
     }
     for name in ["built-in", "leg", "paper"] {
-        let report: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join(format!("complete-{name}.json"))).unwrap())
-                .unwrap();
-        assert_eq!(report["results"].as_array().unwrap().len(), 9, "{name}: {report}");
+        let report: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("complete-{name}.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            report["results"].as_array().unwrap().len(),
+            9,
+            "{name}: {report}"
+        );
     }
 
     let summary: serde_json::Value =

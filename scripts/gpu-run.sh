@@ -11,7 +11,7 @@
 #   --bin FILE        mvpcc built with --features cuda,wgpu, plain or .xz (scripts/build-cuda.sh)
 #                     [target/cuda-dist/mvpcc.xz]
 #   --minutes M       wall-clock budget of the whole script, minutes [9]
-#   --profile-seconds S  the profiles' share of it: none starts after S seconds [150]
+#   --profile-seconds S  the profiles' share of it, in seconds from the start [150]
 #   --objects N       procedural vehicles to train on (prepare --synth) [6000]
 #   --seed N          their seed; each leg should draw new ones [the date, YYYYMMDD]
 #   --init PATH|none  weights the leg starts from (train --init) [assets]
@@ -30,7 +30,8 @@
 # `*_ms_median=` lines of every profile, mvpcc and PyTorch), train.json (the run's summary),
 # complete-{built-in,leg,paper}.json (`complete --json` timings of test partials),
 # run.tar.xz.part-* (the run directory without checkpoints: weights, config, log.jsonl,
-# losses.png, samples/, and best/ with the weights of the best validation, optimizers left out). Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
+# losses.png, samples/, and best/ with the best validation's weights but not its optimizers).
+# Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
 set -uo pipefail
 
 bin=target/cuda-dist/mvpcc.xz
@@ -182,7 +183,8 @@ fi
 timing=(--runs "$runs" --warmup "$warmup")
 torch=benches/reference/generator_torch.py
 have_torch=false
-python3 -c 'import torch' 2>/dev/null && have_torch=true || say "no PyTorch here: its profiles are skipped"
+python3 -c 'import torch' 2>/dev/null && have_torch=true ||
+    say "no PyTorch here: its profiles are skipped"
 step_profile() {
     profile "mvpcc $1 $2 train step, batch $profile_batch$3:" "$mvpcc" profile "${timing[@]}" \
         --device "$1" --config "$2" --train --batch "$profile_batch" "${@:4}"
@@ -193,7 +195,8 @@ forward_profile() {
 }
 torch_step_profile() {
     $have_torch && profile "torch $torch_device $1 train step, batch $profile_batch:" python3 \
-        "$torch" "${timing[@]}" --device "$torch_device" --config "$1" --train --batch "$profile_batch"
+        "$torch" "${timing[@]}" --device "$torch_device" --config "$1" --train \
+        --batch "$profile_batch"
 }
 torch_forward_profile() {
     $have_torch && profile "torch $torch_device $1 forward, batch 1:" python3 "$torch" \

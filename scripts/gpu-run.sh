@@ -24,6 +24,9 @@
 #                     they cost CD; leg 12, the built-in model, trained so) [l1]
 #   --loss-depth W    weight of train's depth term (train --loss-depth; leg 12 trained with
 #                     100) [100]
+#   --input-copy      the generator keeps its input's pixels (train --input-copy): for a fresh
+#                     model (--init none), as the built-in one does; a leg from weights keeps
+#                     theirs
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
@@ -47,6 +50,7 @@ lr=5e-4
 losses=l1
 loss_depth=100
 tiny=false
+copy_args=()
 while [ $# -gt 1 ]; do
     case $1 in
     --bin) bin=$2 ;;
@@ -62,6 +66,7 @@ while [ $# -gt 1 ]; do
     --losses) losses=$2 ;;
     --loss-depth) loss_depth=$2 ;;
     --tiny) tiny=true; shift; continue ;;
+    --input-copy) copy_args=(--input-copy); shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
     esac
     shift 2
@@ -232,8 +237,8 @@ say "waiting for the data"
 wait $prepare || { say "prepare failed"; exit 1; }
 du -sh "$data" >>"$log"
 
-init_args=(--config "$config")
-[ "$init" = none ] || init_args=(--init "$init")
+init_args=(--config "$config" "${copy_args[@]}")
+[ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}")
 run=$work/run
 left=$((deadline - $(date +%s) - margin))
 # The smoke test trains for half a minute however slow the machine it runs on is.

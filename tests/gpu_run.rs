@@ -12,7 +12,15 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     let output = Command::new("bash")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .arg("scripts/gpu-run.sh")
-        .args(["--tiny", "--minutes", "1", "--loss-depth", "5", "--bin"])
+        .args([
+            "--tiny",
+            "--minutes",
+            "1",
+            "--loss-depth",
+            "5",
+            "--input-copy",
+            "--bin",
+        ])
         .arg(assert_cmd::cargo::cargo_bin("mvpcc"))
         .arg(&out)
         .output()
@@ -96,6 +104,9 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     let settings: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("train.json")).unwrap()).unwrap();
     assert_eq!(settings["loss"]["depth"], 5.0, "{settings}");
+    let config: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
+    assert_eq!(config["input_copy"], true, "{config}");
     assert!(!run.join("checkpoints").exists());
     assert!(has_png(&run.join("samples")), "no samples drawn");
 }

@@ -228,6 +228,38 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
 }
 
 #[test]
+fn a_run_widens_another_runs_generator_and_starts_from_its_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let [narrow, wide, thinner] = ["narrow", "wide", "thinner"].map(|n| dir.path().join(n));
+    train(&narrow, 2, &[]).assert().success();
+    #[rustfmt::skip]
+    base(&wide)
+        .args(["--init", s(&narrow), "--widen", "12", "--steps", "0", "--val-every", "0"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("width 12").and(predicate::str::contains("a fresh discriminator")));
+    let (before, after) = (output_of(&narrow), output_of(&wide));
+    let largest = before
+        .iter()
+        .zip(&after)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f32::max);
+    assert!(largest < 1e-5, "outputs differ by {largest}");
+
+    #[rustfmt::skip]
+    base(&thinner)
+        .args(["--init", s(&narrow), "--widen", "4", "--steps", "1"])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::starts_with("error: ")
+                .and(predicate::str::contains("its width 8 is larger than the 4 asked for"))
+                .and(predicate::str::contains("\n").count(1)),
+        );
+    assert!(!thinner.join("generator.safetensors").exists());
+}
+
+#[test]
 fn a_run_without_the_input_copy_starts_one_with_it_and_back() {
     let dir = tempfile::tempdir().unwrap();
     let [plain, copying, back] = ["plain", "copying", "back"].map(|n| dir.path().join(n));

@@ -666,6 +666,11 @@ pub struct TrainArgs {
     /// The discriminator's weights to start from with --init, over the one --init finds.
     #[arg(long, requires = "init")]
     pub init_discriminator: Option<PathBuf>,
+    /// Widen --init's generator to this width: its channels keep their weights and the new
+    /// ones start without effect, so the run starts from its output (docs/training.md). The
+    /// discriminator starts fresh unless --init-discriminator names one for the new width.
+    #[arg(long, requires = "init", conflicts_with = "config")]
+    pub widen: Option<usize>,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     #[arg(long, help = defaulted("Objects per micro-batch", train().batch))]

@@ -16,6 +16,7 @@ mod layers;
 pub mod loss;
 pub mod vgg;
 pub mod weights;
+pub mod widen;
 
 pub use discriminator::{Discriminator, DiscriminatorOutput};
 pub use generator::{Generator, GeneratorOutput};

@@ -77,6 +77,10 @@ pub enum WeightsError {
     InvalidConfig(#[from] ConfigError),
     #[error("expected model config {expected}, the file has {found}")]
     ConfigMismatch { expected: String, found: String },
+    #[error(
+        "its width {found} is larger than the {wanted} asked for: widening only adds channels"
+    )]
+    Narrower { found: usize, wanted: usize },
     #[error("its orienter config is invalid: {0}")]
     InvalidOrienter(String),
     #[error("its tensors do not fit the config it declares: {0}")]

@@ -16,7 +16,7 @@ use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
 use crate::model::inpaint::Inpainter;
 use crate::model::loss::LossWeights;
-use crate::model::{weights, ModelConfig};
+use crate::model::{weights, widen, ModelConfig};
 use burn::module::Module;
 use burn::tensor::Device;
 use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS};
@@ -84,22 +84,31 @@ pub struct InitWeights {
     pub generator: PathBuf,
     /// A fresh discriminator when absent.
     pub discriminator: Option<PathBuf>,
+    /// The generator is narrower than the run's and is widened ([`widen`]).
+    #[serde(default)]
+    pub widen: bool,
 }
 
 impl InitWeights {
     /// The files `path` names: a generator's weights file, or a folder holding one
     /// ([`weights::generator_in`]), with the discriminator's file beside it when there;
-    /// `discriminator` overrides that one.
-    pub fn find(path: &Path, discriminator: Option<PathBuf>) -> Result<InitWeights, TrainError> {
+    /// `discriminator` overrides that one. With `widen` the one beside is not taken: it was
+    /// made for the narrower network.
+    pub fn find(
+        path: &Path,
+        discriminator: Option<PathBuf>,
+        widen: bool,
+    ) -> Result<InitWeights, TrainError> {
         let generator = if path.is_dir() {
             weights::generator_in(path)?
         } else {
             path.to_path_buf()
         };
-        let beside = path.is_dir().then(|| path.join(DISCRIMINATOR_WEIGHTS));
+        let beside = (path.is_dir() && !widen).then(|| path.join(DISCRIMINATOR_WEIGHTS));
         Ok(InitWeights {
             generator,
             discriminator: discriminator.or(beside.filter(|p| p.is_file())),
+            widen,
         })
     }
 
@@ -123,8 +132,12 @@ impl InitWeights {
         ];
         for (path, network) in files {
             let Some(path) = path else { continue };
+            let widened = self.widen && network == weights::Network::Generator;
             weights::read_config(&read_file(path)?, network)
-                .and_then(|found| weights::compatible(&found, config))
+                .and_then(|found| match widened {
+                    true => widen::widenable(&found, config),
+                    false => weights::compatible(&found, config),
+                })
                 .map_err(|source| TrainError::Weights {
                     path: path.clone(),
                     context: "--init: ",
@@ -145,8 +158,12 @@ impl InitWeights {
                 source,
             }
         };
-        let generator = weights::generator_for(&read_file(&self.generator)?, config, device)
-            .map_err(fail(&self.generator))?;
+        let bytes = read_file(&self.generator)?;
+        let generator = match self.widen {
+            true => widen::generator_widened(&bytes, config, device),
+            false => weights::generator_for(&bytes, config, device),
+        }
+        .map_err(fail(&self.generator))?;
         let discriminator = match &self.discriminator {
             Some(path) => {
                 weights::discriminator_for(&read_file(path)?, config, device).map_err(fail(path))?

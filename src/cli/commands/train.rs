@@ -180,11 +180,16 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         settings.init = args
             .init
             .as_deref()
-            .map(|path| InitWeights::find(path, args.init_discriminator.clone()))
+            .map(|path| {
+                InitWeights::find(path, args.init_discriminator.clone(), args.widen.is_some())
+            })
             .transpose()?;
         let base = match (&args.config, &settings.init) {
             (Some(name), _) => model_config(name)?,
-            (None, Some(init)) => init.config()?,
+            (None, Some(init)) => ModelConfig {
+                width: args.widen.unwrap_or(init.config()?.width),
+                ..init.config()?
+            },
             (None, None) => Preset::Cpu.config(),
         };
         (settings, fresh_model(base))

@@ -1,0 +1,321 @@
+//! A wider generator that starts as a narrower one's function (Net2Net's idea, Chen et al.
+//! 2016, with zeros instead of copies): every channel the narrow network has keeps its weights,
+//! the new channels get fresh ones, and the weights from a new channel into an old one are zero.
+//! So the old channels compute what they computed, and the output, which reads only old
+//! channels at first, is the narrow model's; training then lets the new channels in. This is
+//! how a wider network continues the relay from the built-in model's weights instead of from
+//! nothing (docs/training.md).
+//!
+//! The instance norms have no parameters and act per channel, so they need nothing; a residual
+//! block added at the same time would not start as the identity (a zero convolution followed by
+//! an instance norm gives zero, but its first step's output is renormalized to unit variance),
+//! so the depth stays the narrow network's.
+
+use super::weights::{self, WeightsError};
+use super::{Fusion, Generator, ModelConfig};
+use burn::tensor::Device;
+use std::collections::BTreeMap;
+
+/// Runs of channels along one tensor dimension: `(narrow count, wide count)` each, in order
+/// (the fusion convolution reads one run per view, for example).
+type Runs = Vec<(usize, usize)>;
+
+/// One convolution's channel layout in both networks.
+struct Layer {
+    name: String,
+    out: Runs,
+    input: Runs,
+    /// A transposed convolution, whose weight is `[in, out, k, k]` (else `[out, in, k, k]`).
+    transposed: bool,
+}
+
+/// A generator for `config` whose output at the start is that of the (narrower) generator in
+/// `bytes`: see the module's documentation.
+pub fn generator_widened(
+    bytes: &[u8],
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Generator, WeightsError> {
+    let narrow = weights::read_config(bytes, weights::Network::Generator)?;
+    widenable(&narrow, config)?;
+    let mut wide = config.init_generator(device)?;
+    let mut fresh = weights::generator_to_bytes(&wide, config)?;
+    let old = Tensors::parse(bytes)?;
+    let new = Tensors::parse(&fresh)?;
+    let mut values = new.values(&fresh);
+    for layer in layers(&narrow, config) {
+        let weight = format!("{}.conv.weight", layer.name);
+        let bias = format!("{}.conv.bias", layer.name);
+        let old_weight = old.values_of(bytes, &weight)?;
+        copy_weight(&layer, &old_weight, values.get_mut(&weight), &weight)?;
+        copy_bias(
+            &layer,
+            &old.values_of(bytes, &bias)?,
+            values.get_mut(&bias),
+            &bias,
+        )?;
+    }
+    new.write(&mut fresh, &values);
+    weights::apply(&mut wide, &fresh)?;
+    Ok(wide)
+}
+
+/// Whether weights for `narrow` can start a network for `wide`: the same network but for a
+/// width at least as large (and what changes no weight: the image size, the input copy, the
+/// occupancy threshold).
+pub fn widenable(narrow: &ModelConfig, wide: &ModelConfig) -> Result<(), WeightsError> {
+    if wide.width < narrow.width {
+        return Err(WeightsError::Narrower {
+            found: narrow.width,
+            wanted: wide.width,
+        });
+    }
+    let mut same = narrow.clone();
+    same.width = wide.width;
+    weights::compatible(&same, wide)
+}
+
+/// The generator's convolutions, with each dimension's runs of channels (see
+/// `Generator::new`: its layers, their order and their concatenations).
+fn layers(narrow: &ModelConfig, wide: &ModelConfig) -> Vec<Layer> {
+    let scaled = |k: usize| vec![(k * narrow.width, k * wide.width)];
+    let fixed = |n: usize| vec![(n, n)];
+    let planes = narrow.input_channels();
+    let early = narrow.fusion() == Fusion::Early;
+    let conv = |name: &str, out: Runs, input: Runs| Layer {
+        name: name.to_string(),
+        out,
+        input,
+        transposed: false,
+    };
+    let mut layers = vec![
+        conv(
+            "stem",
+            scaled(1),
+            if early {
+                [fixed(planes), scaled(1)].concat()
+            } else {
+                fixed(planes)
+            },
+        ),
+        conv("down.0", scaled(2), scaled(1)),
+        conv("down.1", scaled(4), scaled(2)),
+    ];
+    for block in 0..narrow.res_blocks {
+        for part in ["dilated", "plain"] {
+            layers.push(conv(
+                &format!("middle.{block}.{part}"),
+                scaled(4),
+                scaled(4),
+            ));
+        }
+    }
+    let (fusion_out, fusion_in, decoder_in) = if early {
+        (scaled(1), fixed(planes), scaled(4))
+    } else {
+        (scaled(4), scaled(4), [scaled(4), scaled(4)].concat())
+    };
+    layers.push(conv("fusion", fusion_out, fusion_in.repeat(narrow.views)));
+    for (name, input, out) in [
+        ("up.0", decoder_in, scaled(2)),
+        ("up.1", scaled(2), scaled(1)),
+    ] {
+        layers.push(Layer {
+            transposed: true,
+            ..conv(name, out, input)
+        });
+    }
+    layers.push(conv("head", fixed(narrow.channels.count() + 1), scaled(1)));
+    layers
+}
+
+/// Where channel `i` of the narrow network is in the wide one.
+fn place(runs: &Runs, mut i: usize) -> usize {
+    let mut offset = 0;
+    for &(narrow, wide) in runs {
+        if i < narrow {
+            return offset + i;
+        }
+        i -= narrow;
+        offset += wide;
+    }
+    unreachable!("channel past the layout's runs")
+}
+
+fn count(runs: &Runs) -> [usize; 2] {
+    runs.iter().fold([0, 0], |[n, w], &(a, b)| [n + a, w + b])
+}
+
+/// Writes the narrow weight into the wide one: each old output channel reads its old inputs
+/// with their old weights and nothing from the new ones.
+fn copy_weight(
+    layer: &Layer,
+    old: &(Vec<usize>, Vec<f32>),
+    new: Option<&mut (Vec<usize>, Vec<f32>)>,
+    name: &str,
+) -> Result<(), WeightsError> {
+    let (new_shape, new) = new.ok_or_else(|| missing(name))?;
+    let [out_n, out_w] = count(&layer.out);
+    let [in_n, in_w] = count(&layer.input);
+    let (dims_n, dims_w) = match layer.transposed {
+        false => ([out_n, in_n], [out_w, in_w]),
+        true => ([in_n, out_n], [in_w, out_w]),
+    };
+    let kernel: usize = old.0.iter().skip(2).product();
+    if old.0[..2] != dims_n || new_shape[..2] != dims_w || new.len() != in_w * out_w * kernel {
+        return Err(WeightsError::Tensors(format!(
+            "{name}: shapes {:?} and {new_shape:?} do not fit the layout",
+            old.0
+        )));
+    }
+    // Index of the kernel block of (output channel o, input channel i).
+    let at = |o: usize, i: usize, dims: [usize; 2]| match layer.transposed {
+        false => (o * dims[1] + i) * kernel,
+        true => (i * dims[1] + o) * kernel,
+    };
+    for o in 0..out_n {
+        let o_wide = place(&layer.out, o);
+        for i in 0..in_w {
+            let start = at(o_wide, i, dims_w);
+            new[start..start + kernel].fill(0.0);
+        }
+        for i in 0..in_n {
+            let (from, to) = (at(o, i, dims_n), at(o_wide, place(&layer.input, i), dims_w));
+            new[to..to + kernel].copy_from_slice(&old.1[from..from + kernel]);
+        }
+    }
+    Ok(())
+}
+
+fn copy_bias(
+    layer: &Layer,
+    old: &(Vec<usize>, Vec<f32>),
+    new: Option<&mut (Vec<usize>, Vec<f32>)>,
+    name: &str,
+) -> Result<(), WeightsError> {
+    let (_, new) = new.ok_or_else(|| missing(name))?;
+    for (o, &value) in old.1.iter().enumerate() {
+        new[place(&layer.out, o)] = value;
+    }
+    Ok(())
+}
+
+fn missing(name: &str) -> WeightsError {
+    WeightsError::Tensors(format!("no tensor {name}"))
+}
+
+/// The f32 tensors of a safetensors file: name → (shape, byte range in the file).
+struct Tensors(BTreeMap<String, (Vec<usize>, std::ops::Range<usize>)>);
+
+impl Tensors {
+    fn parse(bytes: &[u8]) -> Result<Tensors, WeightsError> {
+        #[derive(serde::Deserialize)]
+        struct Entry {
+            dtype: String,
+            shape: Vec<usize>,
+            data_offsets: [usize; 2],
+        }
+        let bad = WeightsError::NotSafetensors("header unreadable");
+        let len = bytes
+            .get(..8)
+            .ok_or(WeightsError::NotSafetensors("short"))?;
+        let len = u64::from_le_bytes(len.try_into().expect("8 bytes")) as usize;
+        let header = bytes.get(8..8 + len).ok_or(bad)?;
+        let mut entries: BTreeMap<String, serde_json::Value> = serde_json::from_slice(header)
+            .map_err(|_| WeightsError::NotSafetensors("header is not JSON"))?;
+        entries.remove("__metadata__");
+        let mut tensors = BTreeMap::new();
+        for (name, value) in entries {
+            let entry: Entry = serde_json::from_value(value)
+                .map_err(|_| WeightsError::NotSafetensors("tensor entry unreadable"))?;
+            let [a, b] = entry.data_offsets;
+            let (start, end) = (8 + len + a, 8 + len + b);
+            let size = entry.shape.iter().product::<usize>() * 4;
+            if entry.dtype != "F32" || end - start != size || end > bytes.len() {
+                return Err(WeightsError::Tensors(format!(
+                    "{name}: not f32 data of its shape"
+                )));
+            }
+            tensors.insert(name, (entry.shape, start..end));
+        }
+        Ok(Tensors(tensors))
+    }
+
+    fn values_of(&self, bytes: &[u8], name: &str) -> Result<(Vec<usize>, Vec<f32>), WeightsError> {
+        let (shape, range) = self.0.get(name).ok_or_else(|| missing(name))?;
+        let values = bytes[range.clone()]
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .collect();
+        Ok((shape.clone(), values))
+    }
+
+    fn values(&self, bytes: &[u8]) -> BTreeMap<String, (Vec<usize>, Vec<f32>)> {
+        self.0
+            .keys()
+            .map(|name| (name.clone(), self.values_of(bytes, name).expect("parsed")))
+            .collect()
+    }
+
+    fn write(&self, bytes: &mut [u8], values: &BTreeMap<String, (Vec<usize>, Vec<f32>)>) {
+        for (name, (_, range)) in &self.0 {
+            let out = &mut bytes[range.clone()];
+            for (chunk, value) in out.chunks_exact_mut(4).zip(&values[name].1) {
+                chunk.copy_from_slice(&value.to_le_bytes());
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::gan::value;
+    use crate::model::{Fusion, Preset};
+    use burn::tensor::{Distribution, Tensor};
+
+    fn widened_matches(narrow: ModelConfig, width: usize) {
+        let device = Device::flex();
+        let small = narrow.init_generator(&device).unwrap();
+        let bytes = weights::generator_to_bytes(&small, &narrow).unwrap();
+        let mut wide_config = narrow.clone();
+        wide_config.width = width;
+        let wide = generator_widened(&bytes, &wide_config, &device).unwrap();
+        let x = Tensor::<5>::random([2, 4, 7, 32, 32], Distribution::Default, &device);
+        let (a, b) = (small.forward(x.clone()), wide.forward(x.clone()));
+        let diff = |p: Tensor<5>, q: Tensor<5>| value(p.sub(q).abs().max());
+        assert!(diff(a.images.clone(), b.images) < 1e-5);
+        assert!(diff(a.occupancy, b.occupancy) < 1e-4);
+        // A fresh wide generator computes something else: the equality is the widening's.
+        let other = wide_config.init_generator(&device).unwrap().forward(x);
+        assert!(diff(a.images, other.images) > 1e-3);
+    }
+
+    #[test]
+    fn a_widened_generator_starts_as_the_narrow_one() {
+        widened_matches(Preset::Tiny.config(), 11);
+    }
+
+    #[test]
+    fn a_widened_early_fusion_generator_starts_as_the_narrow_one() {
+        widened_matches(Preset::Tiny.config().with_fusion_kind(Fusion::Early), 12);
+    }
+
+    #[test]
+    fn narrower_or_deeper_is_refused() {
+        let narrow = Preset::Tiny.config();
+        let mut thinner = narrow.clone();
+        thinner.width -= 1;
+        assert!(matches!(
+            widenable(&narrow, &thinner),
+            Err(WeightsError::Narrower { .. })
+        ));
+        let mut deeper = narrow.clone();
+        deeper.width += 2;
+        deeper.res_blocks += 1;
+        assert!(matches!(
+            widenable(&narrow, &deeper),
+            Err(WeightsError::ConfigMismatch { .. })
+        ));
+    }
+}

@@ -27,14 +27,18 @@
 #   --input-copy      the generator keeps its input's pixels (train --input-copy): for a fresh
 #                     model (--init none), as the built-in one does; a leg from weights keeps
 #                     theirs
+#   --widen W         widen the --init weights to width W (train --widen): the leg starts from
+#                     their output with room to learn more (docs/training.md)
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
 # `*_ms_median=` lines of every profile, mvpcc and PyTorch), train.json (the run's summary),
-# complete-{built-in,leg,paper}.json (`complete --json` timings of test partials),
+# complete.json (the `complete --json` reports of test partials, keyed built-in, leg and paper),
 # run.tar.xz.part-* (the run directory without checkpoints: weights, config, log.jsonl,
-# losses.png, samples/, and best/ with the best validation's weights but not its optimizers).
-# Join the parts with `cat OUT/run.tar.xz.part-* | tar -xJ`.
+# losses.png, samples/, and best/ with the best validation's weights but not its optimizers;
+# best/ is left out when the two generators would not fit in the parts' 58 MiB, and the
+# discriminator under --losses l1, which never trains it). Join the parts with
+# `cat OUT/run.tar.xz.part-* | tar -xJ`.
 set -uo pipefail
 
 bin=target/cuda-dist/mvpcc.xz
@@ -51,6 +55,7 @@ losses=l1
 loss_depth=100
 tiny=false
 copy_args=()
+widen_args=()
 while [ $# -gt 1 ]; do
     case $1 in
     --bin) bin=$2 ;;
@@ -65,6 +70,7 @@ while [ $# -gt 1 ]; do
     --lr) lr=$2 ;;
     --losses) losses=$2 ;;
     --loss-depth) loss_depth=$2 ;;
+    --widen) widen_args=(--widen "$2") ;;
     --tiny) tiny=true; shift; continue ;;
     --input-copy) copy_args=(--input-copy); shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
@@ -108,6 +114,11 @@ if $tiny; then
     warmup=0
     config=tiny init=none margin=20 patience_args=(--patience 1000) profile_seconds=100000
     [ "$minutes" -gt 3 ] && minutes=3 && deadline=$(($(date +%s) + 180))
+fi
+
+if [ ${#widen_args[@]} -gt 0 ] && [ "$init" = none ] && ! $tiny; then
+    echo "error: --widen widens the --init weights; --init none has none" >&2
+    exit 2
 fi
 
 say() { echo "[$(date -u +%H:%M:%S)] $*" | tee -a "$log" >&2; }
@@ -238,7 +249,7 @@ wait $prepare || { say "prepare failed"; exit 1; }
 du -sh "$data" >>"$log"
 
 init_args=(--config "$config" "${copy_args[@]}")
-[ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}")
+[ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}" "${widen_args[@]}")
 run=$work/run
 left=$((deadline - $(date +%s) - margin))
 # The smoke test trains for half a minute however slow the machine it runs on is.
@@ -260,9 +271,21 @@ status=$?
 
 # Packed before the timings below, so that a command stopped at its limit still brings the
 # leg back.
+# The device tool brings back 8 files of 16 MiB, 64 MiB in all: the four reports and four
+# parts of 15 MiB at most. Floats barely compress, and the cpu preset's generator alone is
+# 35 MB: with best/'s copy the run would not fit, and the last weights are what a leg continues.
 say "packing"
-tar -C "$run" --exclude checkpoints --exclude 'best/*.bpk' -cf - . | xz_stream |
-    split -b 15M - "$out/run.tar.xz.part-"
+packed=$work/run.tar.xz
+leave=(--exclude checkpoints --exclude 'best/*.bpk')
+[ "$losses" = l1 ] && leave+=(--exclude 'discriminator*')
+pack() { tar -C "$run" "${leave[@]}" -cf - . | xz_stream >"$packed"; }
+pack
+if [ "$(stat -c %s "$packed")" -gt $((58 << 20)) ]; then
+    leave+=(--exclude best)
+    pack
+    say "best/ left out: the run's last weights alone fit what comes back"
+fi
+split -b 15M "$packed" "$out/run.tar.xz.part-"
 
 # The network's share of `complete` (encoder, fusion, decoder), median over the files after
 # the first, whose kernels are compiled and tuned on the way.
@@ -272,14 +295,15 @@ cp assets/example/car_partial.ply "$cases/"
 find "$data/clouds/test" -name 'partial_*.ply' 2>/dev/null | head -8 |
     while read -r f; do cp "$f" "$cases/$(echo "${f#"$data"/clouds/test/}" | tr / _)"; done
 # The built-in model, the leg's, and the built-in one in the paper's pipeline (`--paper`: the
-# paper's Table 4 stages). Each report is kept in OUT (complete-NAME.json) for its per-stage times.
+# paper's Table 4 stages). The reports are kept whole, for their per-stage times, in one file of
+# OUT (complete.json), since what comes back is counted in files.
 for name in built-in leg paper; do
     case $name in
     built-in) args=() label="model built-in" ;;
     leg) args=(--model "$run") label="model $run" ;;
     paper) args=(--paper) label="model built-in, --paper" ;;
     esac
-    report=$out/complete-$name.json
+    report=$work/complete-$name.json
     say "\$ complete --input-dir $cases --device $device --jobs 1 --json ${args[*]}"
     # A file that fails is listed in the report with its error; the others still count.
     timeout 90 "$mvpcc" complete --input-dir "$cases" --output-dir "$work/completed-$name" \
@@ -301,4 +325,14 @@ if seconds:
 print(line + ("" if reports else " (no report: see run.log)"))
 PY
 done
+python3 - "$work" >"$out/complete.json" <<'PY'
+import json, sys
+reports = {}
+for name in ("built-in", "leg", "paper"):
+    try:
+        reports[name] = json.load(open(f"{sys.argv[1]}/complete-{name}.json"))
+    except (OSError, ValueError):
+        reports[name] = None
+json.dump(reports, sys.stdout, indent=1)
+PY
 ls -l "$out" | tee -a "$log" >&2

@@ -52,17 +52,14 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
             "{profiles}\n{log}"
         );
     }
+    let reports: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("complete.json")).unwrap()).unwrap();
     for name in ["built-in", "leg", "paper"] {
-        let report: serde_json::Value = serde_json::from_slice(
-            &std::fs::read(out.join(format!("complete-{name}.json"))).unwrap(),
-        )
-        .unwrap();
-        assert_eq!(
-            report["results"].as_array().unwrap().len(),
-            9,
-            "{name}: {report}"
-        );
+        let results = reports[name]["results"].as_array();
+        assert_eq!(results.map(Vec::len), Some(9), "{name}: {reports}");
     }
+    // What the device tool brings back is counted in files (8 at most).
+    assert!(std::fs::read_dir(&out).unwrap().count() <= 8);
 
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap())
@@ -90,7 +87,6 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     assert!(unpacked.success());
     for file in [
         "generator.safetensors",
-        "discriminator.safetensors",
         "config.json",
         "train.json",
         "log.jsonl",
@@ -108,6 +104,8 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
         serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["input_copy"], true, "{config}");
     assert!(!run.join("checkpoints").exists());
+    // The l1 losses never train the discriminator: it would come back as it went.
+    assert!(!run.join("discriminator.safetensors").exists());
     assert!(has_png(&run.join("samples")), "no samples drawn");
 }
 

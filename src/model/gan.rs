@@ -338,8 +338,7 @@ fn adam_config(optim: &GanOptimConfig) -> AdamConfig {
         .with_epsilon(optim.epsilon)
 }
 
-/// A one-element loss read back as a number; NaN if the backend cannot give one.
-/// A scalar loss's value, NaN when it cannot be read.
+/// A one-element tensor (a loss) read back as a number; NaN if the backend cannot give one.
 pub(crate) fn value(t: Tensor<1>) -> f32 {
     t.into_data()
         .try_into_vec::<f32>()

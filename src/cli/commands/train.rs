@@ -186,10 +186,13 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             .transpose()?;
         let base = match (&args.config, &settings.init) {
             (Some(name), _) => model_config(name)?,
-            (None, Some(init)) => ModelConfig {
-                width: args.widen.unwrap_or(init.config()?.width),
-                ..init.config()?
-            },
+            (None, Some(init)) => {
+                let own = init.config()?;
+                ModelConfig {
+                    width: args.widen.unwrap_or(own.width),
+                    ..own
+                }
+            }
             (None, None) => Preset::Cpu.config(),
         };
         (settings, fresh_model(base))

@@ -1,16 +1,34 @@
 //! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient and
-//! complete with the built-in models, write; and the parts users can switch off.
+//! complete with the built-in models, write; and the parts users can switch off. With
+//! `MVPCC_BENCH_MODEL=FILE` (a generator's weights, such as a relay leg's) the network method is
+//! timed with that model too, in the same run, so a candidate's cost is compared with the
+//! built-in model's on the same machine state (docs/training.md).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::complete::orient::OrientMode;
+use mvpcc::complete::orient::{OrientMode, Orienter};
 use mvpcc::complete::{Completer, Method, Options, Settings};
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use mvpcc::model::inpaint::Inpainter;
 use std::time::Duration;
 
 mod common;
 
+/// The built-in models, and the generator `MVPCC_BENCH_MODEL` names beside them.
+fn completers() -> Vec<(String, Completer)> {
+    let device = burn::tensor::Device::flex();
+    let mut all = vec![(String::new(), Completer::builtin(device.clone()).unwrap())];
+    if let Some(path) = std::env::var_os("MVPCC_BENCH_MODEL") {
+        let bytes = std::fs::read(&path).unwrap();
+        let inpainter = Inpainter::from_bytes(&bytes, device).unwrap();
+        let orienter = Orienter::builtin().unwrap();
+        let name = format!(", {}", path.to_string_lossy());
+        all.push((name, Completer::new(Some(inpainter), Some(orienter))));
+    }
+    all
+}
+
 fn end_to_end(c: &mut Criterion) {
-    let completer = Completer::builtin(burn::tensor::Device::flex()).unwrap();
+    let completers = completers();
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("scan.ply");
     let output = dir.path().join("done.ply");
@@ -22,8 +40,12 @@ fn end_to_end(c: &mut Criterion) {
         group
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
-        for method in [Method::Network, Method::Mirror] {
-            group.bench_function(format!("{method:?}: read, orient, complete, write"), |b| {
+        let runs = completers
+            .iter()
+            .map(|(model, c)| (Method::Network, model.as_str(), c));
+        for (method, model, completer) in runs.chain([(Method::Mirror, "", &completers[0].1)]) {
+            let label = format!("{method:?}{model}: read, orient, complete, write");
+            group.bench_function(label, |b| {
                 b.iter(|| {
                     let cloud = read_cloud(&input, None).unwrap().cloud;
                     let settings = Settings {

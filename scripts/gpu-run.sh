@@ -162,6 +162,17 @@ esac
 chmod +x "$work/mvpcc"
 mvpcc=$work/mvpcc
 say "mvpcc $($mvpcc --version), device $device, out $out"
+# A binary older than an option the leg passes would fail after the data is made, minutes into
+# the lease: checked here instead (a stale target/cuda-dist is the usual cause).
+init_args=(--config "$config" "${copy_args[@]}")
+[ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}" "${widen_args[@]}")
+train_help=$("$mvpcc" train --help 2>&1)
+for option in "${init_args[@]}" "${loss_args[@]}"; do
+    case $option in
+    --*) grep -qw -- "$option" <<<"$train_help" ||
+        { say "$bin: its train has no $option; rebuild it (scripts/build-cuda.sh)"; exit 1; } ;;
+    esac
+done
 if command -v nvidia-smi >/dev/null; then
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | tee -a "$profiles" >>"$log"
 fi
@@ -248,8 +259,6 @@ say "waiting for the data"
 wait $prepare || { say "prepare failed"; exit 1; }
 du -sh "$data" >>"$log"
 
-init_args=(--config "$config" "${copy_args[@]}")
-[ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}" "${widen_args[@]}")
 run=$work/run
 left=$((deadline - $(date +%s) - margin))
 # The smoke test trains for half a minute however slow the machine it runs on is.

@@ -129,6 +129,36 @@ fn an_unknown_losses_choice_is_refused_at_once() {
     assert!(!dir.path().join("out").exists());
 }
 
+/// A binary built before an option the leg passes (a stale target/cuda-dist) is refused before
+/// any data is made, naming the option.
+#[cfg(unix)]
+#[test]
+fn a_binary_without_the_legs_options_is_refused_before_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let old = dir.path().join("old-mvpcc");
+    std::fs::write(&old, "#!/bin/sh\necho 'Usage: mvpcc train --data <DATA>'\n").unwrap();
+    let executable = std::os::unix::fs::PermissionsExt::from_mode(0o755);
+    std::fs::set_permissions(&old, executable).unwrap();
+    let out = dir.path().join("out");
+    let output = Command::new("bash")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .arg("scripts/gpu-run.sh")
+        .args(["--widen", "48", "--bin"])
+        .arg(&old)
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("its train has no --init; rebuild it"),
+        "{stderr}"
+    );
+    assert!(!std::fs::read_to_string(out.join("run.log"))
+        .unwrap()
+        .contains("prepare"));
+}
+
 fn has_png(dir: &Path) -> bool {
     std::fs::read_dir(dir).is_ok_and(|mut d| {
         d.any(|e| e.is_ok_and(|e| e.path().extension().is_some_and(|x| x == "png")))

@@ -776,6 +776,11 @@ pub struct TrainArgs {
         train().tv_from_stage,
     ))]
     pub tv_from_stage: Option<usize>,
+    #[arg(long, help = defaulted(
+        "Steps over which the learning rate rises linearly from zero to --lr's (for a widened network, docs/training.md)",
+        train().warmup_steps,
+    ))]
+    pub warmup_steps: Option<u64>,
     /// Threads that load and render samples while the network trains (1–256).
     #[arg(long, default_value_t = 1, value_parser = counts(1, MAX_WORKERS))]
     pub workers: usize,

@@ -71,6 +71,11 @@ pub struct TrainSettings {
     /// The first stage (1-based) whose loss has the total-variation term.
     #[serde(default = "default_tv_from_stage")]
     pub tv_from_stage: usize,
+    /// Steps over which the run's learning rate rises linearly to the first stage's: fresh
+    /// Adam moves every weight by about the rate from its first step, which a widened network
+    /// (`--widen`) pays for (docs/training.md).
+    #[serde(default)]
+    pub warmup_steps: u64,
 }
 
 /// The original adds total variation from its second stage on.
@@ -219,6 +224,7 @@ impl Default for TrainSettings {
             vgg19: None,
             init: None,
             tv_from_stage: default_tv_from_stage(),
+            warmup_steps: 0,
         }
     }
 }
@@ -259,6 +265,15 @@ impl TrainSettings {
             return Ok(());
         };
         Err(SettingsError(problem.to_string()))
+    }
+
+    /// The generator's learning rate for the step after `step` in `stage`.
+    pub fn rate(&self, stage: usize, step: u64) -> f64 {
+        let warm = match self.warmup_steps {
+            0 => 1.0,
+            n => ((step + 1) as f64 / n as f64).min(1.0),
+        };
+        self.stage_rates[stage] * warm
     }
 
     /// The most steps the stages can take together.
@@ -749,6 +764,22 @@ mod tests {
             breaks(&mut settings);
             assert!(settings.validate().is_err(), "case {i}");
         }
+    }
+
+    #[test]
+    fn the_rate_rises_over_the_warmup_then_follows_the_stages() {
+        let settings = TrainSettings {
+            stage_rates: vec![1e-4, 1e-5],
+            warmup_steps: 4,
+            ..TrainSettings::default()
+        };
+        let rates: Vec<f64> = (0..6).map(|step| settings.rate(0, step)).collect();
+        let expected = [0.25e-4, 0.5e-4, 0.75e-4, 1e-4, 1e-4, 1e-4];
+        for (rate, expected) in rates.iter().zip(expected) {
+            assert!((rate - expected).abs() < 1e-12, "{rates:?}");
+        }
+        assert_eq!(settings.rate(1, 100), 1e-5);
+        assert_eq!(TrainSettings::default().rate(0, 0), 1e-4);
     }
 
     fn scores(cd: Option<f64>) -> Scores {

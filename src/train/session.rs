@@ -152,7 +152,7 @@ impl<'a> Session<'a> {
         debug_assert_eq!(data.step, self.state.step);
         let started = Instant::now();
         self.interval.wait += (started - waited).as_secs_f64();
-        let rate = settings.stage_rates[self.state.stage];
+        let rate = settings.rate(self.state.stage, self.state.step);
         // The total-variation term joins from stage `tv_from_stage` (1-based) on.
         self.gan.weights.tv = if self.state.stage + 1 < settings.tv_from_stage {
             0.0

@@ -78,7 +78,8 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     set!(batch <- batch, accumulate <- accumulate, stage_steps <- stage_steps,
         patience <- patience, val_every <- val_every, val_samples <- val_samples,
         val_fraction <- val_fraction, checkpoint_every <- checkpoint_every, keep <- keep,
-        log_every <- log_every, seed <- seed, tv_from_stage <- tv_from_stage);
+        log_every <- log_every, seed <- seed, tv_from_stage <- tv_from_stage,
+        warmup_steps <- warmup_steps);
     let loss = &mut s.loss;
     for (weight, arg) in [
         (&mut loss.l1, args.loss_l1),

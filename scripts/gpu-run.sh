@@ -29,6 +29,7 @@
 #                     theirs
 #   --widen W         widen the --init weights to width W (train --widen): the leg starts from
 #                     their output with room to learn more (docs/training.md)
+#   --warmup-steps N  steps over which the rate rises to --lr (train --warmup-steps) [0]
 #   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
@@ -56,6 +57,7 @@ loss_depth=100
 tiny=false
 copy_args=()
 widen_args=()
+warmup=0
 while [ $# -gt 1 ]; do
     case $1 in
     --bin) bin=$2 ;;
@@ -71,6 +73,7 @@ while [ $# -gt 1 ]; do
     --losses) losses=$2 ;;
     --loss-depth) loss_depth=$2 ;;
     --widen) widen_args=(--widen "$2") ;;
+    --warmup-steps) warmup=$2 ;;
     --tiny) tiny=true; shift; continue ;;
     --input-copy) copy_args=(--input-copy); shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
@@ -84,6 +87,7 @@ l1) loss_args=(--loss-adversarial 0 --loss-perceptual 0 --loss-style 0) ;;
 *) echo "error: --losses $losses: gan or l1" >&2; exit 2 ;;
 esac
 loss_args+=(--loss-depth "$loss_depth")
+rate_args=(--lr "$lr" --warmup-steps "$warmup")
 out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
@@ -167,7 +171,7 @@ say "mvpcc $($mvpcc --version), device $device, out $out"
 init_args=(--config "$config" "${copy_args[@]}")
 [ "$init" = none ] || init_args=(--init "$init" "${copy_args[@]}" "${widen_args[@]}")
 train_help=$("$mvpcc" train --help 2>&1)
-for option in "${init_args[@]}" "${loss_args[@]}"; do
+for option in "${init_args[@]}" "${loss_args[@]}" "${rate_args[@]}"; do
     case $option in
     --*) grep -qw -- "$option" <<<"$train_help" ||
         { say "$bin: its train has no $option; rebuild it (scripts/build-cuda.sh)"; exit 1; } ;;
@@ -270,9 +274,10 @@ $tiny && [ $left -lt 30 ] && left=30
 # sends the signal to train and then to its whole process group, train among them, and a
 # second SIGINT makes train exit at once, writing nothing (a CI run on a loaded machine lost
 # its train.json so).
-say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch --lr $lr ${loss_args[*]} ($left s)"
+say "\$ train --data $data --out $run ${init_args[*]} --size $size --device $device --batch $batch ${rate_args[*]} ${loss_args[*]} ($left s)"
 timeout -k 60 $((left + 60)) timeout --foreground -s INT "$left" "$mvpcc" train --data "$data" --out "$run" \
-    "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" --lr "$lr" "${loss_args[@]}" \
+    "${init_args[@]}" --size "$size" --device "$device" --batch "$batch" "${rate_args[@]}" \
+    "${loss_args[@]}" \
     --val-every "$val_every" --val-samples 32 --checkpoint-every 500 --workers "$workers" \
     "${patience_args[@]}" --json >"$out/train.json" 2>>"$log"
 status=$?

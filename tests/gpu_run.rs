@@ -18,6 +18,8 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
             "1",
             "--loss-depth",
             "5",
+            "--warmup-steps",
+            "3",
             "--input-copy",
             "--bin",
         ])
@@ -100,6 +102,7 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     let settings: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("train.json")).unwrap()).unwrap();
     assert_eq!(settings["loss"]["depth"], 5.0, "{settings}");
+    assert_eq!(settings["warmup_steps"], 3, "{settings}");
     let config: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run.join("config.json")).unwrap()).unwrap();
     assert_eq!(config["input_copy"], true, "{config}");

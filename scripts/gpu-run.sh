@@ -87,7 +87,8 @@ l1) loss_args=(--loss-adversarial 0 --loss-perceptual 0 --loss-style 0) ;;
 *) echo "error: --losses $losses: gan or l1" >&2; exit 2 ;;
 esac
 loss_args+=(--loss-depth "$loss_depth")
-rate_args=(--lr "$lr" --warmup-steps "$warmup")
+rate_args=(--lr "$lr")
+[ "$warmup" = 0 ] || rate_args+=(--warmup-steps "$warmup")
 out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)

@@ -219,8 +219,11 @@ impl Tensors {
         let len = bytes
             .get(..8)
             .ok_or(WeightsError::NotSafetensors("short"))?;
-        let len = u64::from_le_bytes(len.try_into().expect("8 bytes")) as usize;
-        let header = bytes.get(8..8 + len).ok_or(bad)?;
+        let len = usize::try_from(u64::from_le_bytes(len.try_into().expect("8 bytes")))
+            .ok()
+            .and_then(|len| len.checked_add(8))
+            .ok_or(WeightsError::NotSafetensors("header length past the end"))?;
+        let header = bytes.get(8..len).ok_or(bad)?;
         let mut entries: BTreeMap<String, serde_json::Value> = serde_json::from_slice(header)
             .map_err(|_| WeightsError::NotSafetensors("header is not JSON"))?;
         entries.remove("__metadata__");
@@ -228,15 +231,27 @@ impl Tensors {
         for (name, value) in entries {
             let entry: Entry = serde_json::from_value(value)
                 .map_err(|_| WeightsError::NotSafetensors("tensor entry unreadable"))?;
+            // Checked, since the file is the user's: a range past its end or of another
+            // size than the shape's is refused, not a panic.
             let [a, b] = entry.data_offsets;
-            let (start, end) = (8 + len + a, 8 + len + b);
-            let size = entry.shape.iter().product::<usize>() * 4;
-            if entry.dtype != "F32" || end - start != size || end > bytes.len() {
-                return Err(WeightsError::Tensors(format!(
-                    "{name}: not f32 data of its shape"
-                )));
+            let size = entry
+                .shape
+                .iter()
+                .try_fold(4usize, |n, &d| n.checked_mul(d));
+            let range = len.checked_add(a).zip(len.checked_add(b));
+            let fits = |&(start, end): &(usize, usize)| {
+                end <= bytes.len() && end.checked_sub(start) == size
+            };
+            match range.filter(fits) {
+                Some((start, end)) if entry.dtype == "F32" => {
+                    tensors.insert(name, (entry.shape, start..end));
+                }
+                _ => {
+                    return Err(WeightsError::Tensors(format!(
+                        "{name}: not f32 data of its shape"
+                    )))
+                }
             }
-            tensors.insert(name, (entry.shape, start..end));
         }
         Ok(Tensors(tensors))
     }
@@ -299,6 +314,21 @@ mod tests {
     #[test]
     fn a_widened_early_fusion_generator_starts_as_the_narrow_one() {
         widened_matches(Preset::Tiny.config().with_fusion_kind(Fusion::Early), 12);
+    }
+
+    #[test]
+    fn a_cut_off_file_is_an_error_not_a_panic() {
+        let device = Device::flex();
+        let narrow = Preset::Tiny.config();
+        let g = narrow.init_generator(&device).unwrap();
+        let bytes = weights::generator_to_bytes(&g, &narrow).unwrap();
+        let mut wide = narrow.clone();
+        wide.width += 2;
+        let cut = &bytes[..bytes.len() - 100];
+        assert!(matches!(
+            generator_widened(cut, &wide, &device),
+            Err(WeightsError::Tensors(_))
+        ));
     }
 
     #[test]

@@ -777,7 +777,7 @@ pub struct TrainArgs {
     ))]
     pub tv_from_stage: Option<usize>,
     #[arg(long, help = defaulted(
-        "Steps over which the learning rate rises linearly from zero to --lr's (for a widened network, docs/training.md)",
+        "Steps over which the learning rate rises linearly from zero to --lr's",
         train().warmup_steps,
     ))]
     pub warmup_steps: Option<u64>,

@@ -71,9 +71,9 @@ pub struct TrainSettings {
     /// The first stage (1-based) whose loss has the total-variation term.
     #[serde(default = "default_tv_from_stage")]
     pub tv_from_stage: usize,
-    /// Steps over which the run's learning rate rises linearly to the first stage's: fresh
-    /// Adam moves every weight by about the rate from its first step, which a widened network
-    /// (`--widen`) pays for (docs/training.md).
+    /// Steps over which the run's learning rate rises linearly to the first stage's, since
+    /// fresh Adam moves every weight by about the rate from its first step (docs/training.md
+    /// measures it on a widened network).
     #[serde(default)]
     pub warmup_steps: u64,
 }

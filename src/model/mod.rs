@@ -110,7 +110,8 @@ pub enum Preset {
     /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
     Paper,
     /// The CPU default, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero padding,
-    /// the largest measured shape whose whole `complete` stays within a second on two cores.
+    /// the largest shape whose whole `complete` stayed within a second on two cores when chosen
+    /// (2026-12-01; a later day's slower forward is in docs/speed.md).
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
     Small,

@@ -44,16 +44,13 @@ pub fn generator_widened(
     let new = Tensors::parse(&fresh)?;
     let mut values = new.values(&fresh);
     for layer in layers(&narrow, config) {
-        let weight = format!("{}.conv.weight", layer.name);
-        let bias = format!("{}.conv.bias", layer.name);
-        let old_weight = old.values_of(bytes, &weight)?;
-        copy_weight(&layer, &old_weight, values.get_mut(&weight), &weight)?;
-        copy_bias(
-            &layer,
-            &old.values_of(bytes, &bias)?,
-            values.get_mut(&bias),
-            &bias,
-        )?;
+        for (part, copy) in [("weight", copy_weight as CopyTensor), ("bias", copy_bias)] {
+            let name = format!("{}.conv.{part}", layer.name);
+            let old = old.values_of(bytes, &name)?;
+            let new = values.get_mut(&name).ok_or_else(|| missing(&name))?;
+            copy(&layer, &old, new)
+                .map_err(|why| WeightsError::Tensors(format!("{name}: {why}")))?;
+        }
     }
     new.write(&mut fresh, &values);
     weights::apply(&mut wide, &fresh)?;
@@ -146,33 +143,38 @@ fn count(runs: &Runs) -> [usize; 2] {
     runs.iter().fold([0, 0], |[n, w], &(a, b)| [n + a, w + b])
 }
 
+/// A tensor's shape and values.
+type Values = (Vec<usize>, Vec<f32>);
+
+/// Writes a narrow tensor into the wide one; why not, when its shape does not fit the layout.
+type CopyTensor = fn(&Layer, &Values, &mut Values) -> Result<(), String>;
+
 /// Writes the narrow weight into the wide one: each old output channel reads its old inputs
 /// with their old weights and nothing from the new ones.
-fn copy_weight(
-    layer: &Layer,
-    old: &(Vec<usize>, Vec<f32>),
-    new: Option<&mut (Vec<usize>, Vec<f32>)>,
-    name: &str,
-) -> Result<(), WeightsError> {
-    let (new_shape, new) = new.ok_or_else(|| missing(name))?;
+fn copy_weight(layer: &Layer, old: &Values, new: &mut Values) -> Result<(), String> {
     let [out_n, out_w] = count(&layer.out);
     let [in_n, in_w] = count(&layer.input);
     let (dims_n, dims_w) = match layer.transposed {
         false => ([out_n, in_n], [out_w, in_w]),
         true => ([in_n, out_n], [in_w, out_w]),
     };
-    let kernel: usize = old.0.iter().skip(2).product();
-    if old.0[..2] != dims_n || new_shape[..2] != dims_w || new.len() != in_w * out_w * kernel {
-        return Err(WeightsError::Tensors(format!(
-            "{name}: shapes {:?} and {new_shape:?} do not fit the layout",
-            old.0
-        )));
+    let (old_shape, new_shape) = (&old.0, &new.0);
+    let kernel: usize = old_shape.iter().skip(2).product();
+    if old_shape.len() != 4
+        || old_shape[..2] != dims_n
+        || new_shape[..2] != dims_w
+        || old_shape[2..] != new_shape[2..]
+    {
+        return Err(format!(
+            "shapes {old_shape:?} and {new_shape:?} do not fit the layout"
+        ));
     }
     // Index of the kernel block of (output channel o, input channel i).
     let at = |o: usize, i: usize, dims: [usize; 2]| match layer.transposed {
         false => (o * dims[1] + i) * kernel,
         true => (i * dims[1] + o) * kernel,
     };
+    let new = &mut new.1;
     for o in 0..out_n {
         let o_wide = place(&layer.out, o);
         for i in 0..in_w {
@@ -187,15 +189,16 @@ fn copy_weight(
     Ok(())
 }
 
-fn copy_bias(
-    layer: &Layer,
-    old: &(Vec<usize>, Vec<f32>),
-    new: Option<&mut (Vec<usize>, Vec<f32>)>,
-    name: &str,
-) -> Result<(), WeightsError> {
-    let (_, new) = new.ok_or_else(|| missing(name))?;
+fn copy_bias(layer: &Layer, old: &Values, new: &mut Values) -> Result<(), String> {
+    if [old.1.len(), new.1.len()] != count(&layer.out) {
+        return Err(format!(
+            "lengths {} and {} do not fit the layout",
+            old.1.len(),
+            new.1.len()
+        ));
+    }
     for (o, &value) in old.1.iter().enumerate() {
-        new[place(&layer.out, o)] = value;
+        new.1[place(&layer.out, o)] = value;
     }
     Ok(())
 }
@@ -256,7 +259,7 @@ impl Tensors {
         Ok(Tensors(tensors))
     }
 
-    fn values_of(&self, bytes: &[u8], name: &str) -> Result<(Vec<usize>, Vec<f32>), WeightsError> {
+    fn values_of(&self, bytes: &[u8], name: &str) -> Result<Values, WeightsError> {
         let (shape, range) = self.0.get(name).ok_or_else(|| missing(name))?;
         let values = bytes[range.clone()]
             .chunks_exact(4)
@@ -265,14 +268,14 @@ impl Tensors {
         Ok((shape.clone(), values))
     }
 
-    fn values(&self, bytes: &[u8]) -> BTreeMap<String, (Vec<usize>, Vec<f32>)> {
+    fn values(&self, bytes: &[u8]) -> BTreeMap<String, Values> {
         self.0
             .keys()
             .map(|name| (name.clone(), self.values_of(bytes, name).expect("parsed")))
             .collect()
     }
 
-    fn write(&self, bytes: &mut [u8], values: &BTreeMap<String, (Vec<usize>, Vec<f32>)>) {
+    fn write(&self, bytes: &mut [u8], values: &BTreeMap<String, Values>) {
         for (name, (_, range)) in &self.0 {
             let out = &mut bytes[range.clone()];
             for (chunk, value) in out.chunks_exact_mut(4).zip(&values[name].1) {

@@ -357,8 +357,8 @@ pub struct CompleteArgs {
     #[command(flatten)]
     pub sor: SorOptions,
     /// A completed point within this distance of a measured or mirrored one is not added; a
-    /// share of the object's size (the side of the network's box: 0.0625 is 4 pixels of a 64²
-    /// view, 8 of a 128² one).
+    /// share of the object's size (the side of the network's box: 0.05 is 3.2 pixels of a 64²
+    /// view, 6.4 of a 128² one).
     #[arg(
         long,
         value_name = "D",
@@ -658,9 +658,9 @@ pub struct TrainArgs {
     pub input_copy: bool,
     /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
     /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
-    /// a folder holding model.safetensors and discriminator.safetensors (as assets/). The model
-    /// config is the weights' own unless --config gives one; only --size and --input-copy may
-    /// differ from it.
+    /// a folder holding model.safetensors and, when there, discriminator.safetensors (as
+    /// assets/). The model config is the weights' own unless --config gives one; only --size
+    /// and --input-copy may differ from it.
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
     /// The discriminator's weights to start from with --init, over the one --init finds.

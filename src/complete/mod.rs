@@ -128,7 +128,7 @@ impl Default for Options {
             snap: true,
             sor: SorParams::default(),
             keep_input: true,
-            merge_distance: 0.0625,
+            merge_distance: 0.05,
             box_margin: 0.025,
             thin: 0.03125,
             symmetry: true,

@@ -766,6 +766,15 @@ mod tests {
         }
     }
 
+    /// The relay starts every leg with `train --init assets`: a file left beside a replaced
+    /// generator (a discriminator made for another width) must fail here, not a GPU lease later.
+    #[test]
+    fn the_shipped_assets_start_a_run() {
+        let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+        let init = InitWeights::find(&assets, None, false).unwrap();
+        init.check(&init.config().unwrap()).unwrap();
+    }
+
     #[test]
     fn the_rate_rises_over_the_warmup_then_follows_the_stages() {
         let settings = TrainSettings {

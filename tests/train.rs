@@ -283,6 +283,34 @@ fn a_run_without_the_input_copy_starts_one_with_it_and_back() {
 }
 
 #[test]
+fn a_run_writes_the_occupancy_threshold_it_is_given_into_its_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let [first, chosen, refused] = ["first", "chosen", "refused"].map(|n| dir.path().join(n));
+    train(&first, 1, &["--val-every", "0"]).assert().success();
+    #[rustfmt::skip]
+    base(&chosen)
+        .args(["--init", s(&first), "--occupancy", "0.02", "--steps", "0", "--val-every", "0"])
+        .assert()
+        .success();
+    let bytes = std::fs::read(chosen.join("generator.safetensors")).unwrap();
+    let (_, config) = generator_from_bytes(&bytes, &Device::flex()).unwrap();
+    assert_eq!(config.occupancy, Some(0.02));
+    assert_eq!(output_of(&first), output_of(&chosen));
+
+    #[rustfmt::skip]
+    base(&refused)
+        .args(["--init", s(&first), "--occupancy", "1.5", "--steps", "0"])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::starts_with("error: ")
+                .and(predicate::str::contains("1.5 is not a probability"))
+                .and(predicate::str::contains("\n").count(1)),
+        );
+    assert!(!refused.join("generator.safetensors").exists());
+}
+
+#[test]
 fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");

@@ -656,6 +656,11 @@ pub struct TrainArgs {
     /// pixel, so it learns only the pixels it completes (docs/network.md) [default: the config's]
     #[arg(long)]
     pub input_copy: bool,
+    /// The occupancy threshold saved with the weights, which `complete` uses unless told
+    /// otherwise: chosen on the validation split (docs/training.md). `--init W --steps 0`
+    /// writes W's weights with it [default: the config's]
+    #[arg(long, value_name = "P")]
+    pub occupancy: Option<f64>,
     /// Start a new run from trained weights, with fresh optimizers: a generator's weights file,
     /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
     /// a folder holding model.safetensors and, when there, discriminator.safetensors (as

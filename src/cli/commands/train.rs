@@ -151,6 +151,10 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             Some(fusion) => base.with_fusion_kind(fusion),
             None => base,
         };
+        let base = match args.occupancy {
+            Some(p) => base.with_occupancy(Some(p)),
+            None => base,
+        };
         if args.input_copy {
             base.with_input_copy_kind(true)
         } else {

@@ -177,13 +177,18 @@ fn a_run_writes_its_files_and_resumes_exactly() {
     );
 }
 
-/// `cmd` (a run with `--init`) fails with one line saying the weights' config does not fit.
-fn refused_for_its_config(cmd: &mut Command) {
+/// `cmd` fails with one line of error holding `text`.
+fn refused_saying(cmd: &mut Command, text: &str) {
     cmd.assert().failure().stderr(
         predicate::str::starts_with("error: ")
-            .and(predicate::str::contains("--init: expected model config"))
+            .and(predicate::str::contains(text))
             .and(predicate::str::contains("\n").count(1)),
     );
+}
+
+/// `cmd` (a run with `--init`) fails with one line saying the weights' config does not fit.
+fn refused_for_its_config(cmd: &mut Command) {
+    refused_saying(cmd, "--init: expected model config");
 }
 
 /// The steps of a run's validation records, in log order.
@@ -246,16 +251,10 @@ fn a_run_widens_another_runs_generator_and_starts_from_its_output() {
         .fold(0.0, f32::max);
     assert!(largest < 1e-5, "outputs differ by {largest}");
 
-    #[rustfmt::skip]
-    base(&thinner)
-        .args(["--init", s(&narrow), "--widen", "4", "--steps", "1"])
-        .assert()
-        .failure()
-        .stderr(
-            predicate::str::starts_with("error: ")
-                .and(predicate::str::contains("its width 8 is larger than the 4 asked for"))
-                .and(predicate::str::contains("\n").count(1)),
-        );
+    refused_saying(
+        base(&thinner).args(["--init", s(&narrow), "--widen", "4", "--steps", "1"]),
+        "its width 8 is larger than the 4 asked for",
+    );
     assert!(!thinner.join("generator.safetensors").exists());
 }
 
@@ -297,16 +296,10 @@ fn a_run_writes_the_occupancy_threshold_it_is_given_into_its_weights() {
     assert_eq!(config.occupancy, Some(0.02));
     assert_eq!(output_of(&first), output_of(&chosen));
 
-    #[rustfmt::skip]
-    base(&refused)
-        .args(["--init", s(&first), "--occupancy", "1.5", "--steps", "0"])
-        .assert()
-        .failure()
-        .stderr(
-            predicate::str::starts_with("error: ")
-                .and(predicate::str::contains("1.5 is not a probability"))
-                .and(predicate::str::contains("\n").count(1)),
-        );
+    refused_saying(
+        base(&refused).args(["--init", s(&first), "--occupancy", "1.5", "--steps", "0"]),
+        "1.5 is not a probability",
+    );
     assert!(!refused.join("generator.safetensors").exists());
 }
 

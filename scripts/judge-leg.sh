@@ -13,7 +13,7 @@
 # the validation splits, 8 by default; a gain under about 0.005 on seed 8 is checked on 9-11
 # too (docs/completing.md). Each split (150 generated objects, two partials each, clouds only)
 # is made once into target/valset (seed 8) or target/valsetN; results go to
-# target/judge/<split>/<mode>-<who>/. MVPCC names the binary [target/release/mvpcc].
+# target/judge/seedN/<mode>-<who>/. MVPCC names the binary [target/release/mvpcc].
 #
 # Prints each scoring's table, then one line per split and mode with F1@0.01 / cd_l1 /
 # cd_l2_half of the built-in model and the leg and whether the leg is better in all three, and

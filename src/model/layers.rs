@@ -91,7 +91,8 @@ pub struct ConvNorm {
 pub enum Formulation {
     /// Sliced on the CPU, plain on any other device.
     Auto,
-    /// `reflect_pad` from slices and `shifted_conv` for wide stride-1 layers.
+    /// `reflect_pad` from slices, `shifted_conv` for wide stride-1 layers and `strided_conv`
+    /// for the encoder's stride-2 ones.
     Sliced,
     /// Burn's `conv2d` and `PadMode::Reflect`.
     Plain,
@@ -186,6 +187,10 @@ impl ConvNorm {
             }),
         };
         let x = probe.layer(self.kind, || {
+            let bias = || self.conv.bias.as_ref().map(|b| b.val());
+            if sliced && self.halves(&x) {
+                return strided_conv(x, self.conv.weight.val(), bias());
+            }
             if !(self.shifted && sliced) {
                 return self.conv.forward(x);
             }
@@ -195,17 +200,23 @@ impl ConvNorm {
             } else {
                 x
             };
-            shifted_conv(
-                x,
-                self.conv.weight.val(),
-                self.conv.bias.as_ref().map(|b| b.val()),
-                self.conv.dilation[0],
-            )
+            shifted_conv(x, self.conv.weight.val(), bias(), self.conv.dilation[0])
         });
         match &self.norm {
             Some(norm) => probe.layer(LayerKind::InstanceNorm, || norm.forward(x)),
             None => x,
         }
+    }
+
+    /// Whether this is a 4×4 stride-2 convolution with one pixel of zero padding over an input
+    /// of even sides (the encoder's), which [`strided_conv`] writes as plain matrix products.
+    fn halves(&self, x: &Tensor<4>) -> bool {
+        let [.., h, w] = x.dims();
+        self.conv.stride == [2, 2]
+            && self.conv.kernel_size == [4, 4]
+            && self.zeros == 1
+            && h % 2 == 0
+            && w % 2 == 0
     }
 }
 
@@ -264,6 +275,29 @@ pub fn shifted_conv(
         Some(b) => y + b.reshape([1, c_out, 1, 1]),
         None => y,
     }
+}
+
+/// 4×4 stride-2 convolution with one pixel of zero padding, as a 2×2 stride-1 [`shifted_conv`]
+/// over the padded input's 2×2 pixel blocks stacked as planes (space to depth): the same sums,
+/// but as plain matrix products over 4·c_in planes instead of flex's im2col.
+///
+/// # Shapes
+/// `x`: `[n, c_in, h, w]` (h, w even), `weight`: `[c_out, c_in, 4, 4]` → `[n, c_out, h/2, w/2]`
+pub fn strided_conv(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
+    let [n, c_in, h, w] = x.dims();
+    let [c_out, ..] = weight.dims();
+    let (hb, wb) = (h / 2 + 1, w / 2 + 1);
+    let blocks = x
+        .pad([(1, 1), (1, 1)], PadMode::Constant(0.0))
+        .reshape([n * c_in, hb, 2, wb, 2])
+        .permute([0, 2, 4, 1, 3])
+        .reshape([n, c_in * 4, hb, wb]); // plane c·4 + 2·dy + dx
+                                         // Tap (2a + dy, 2b + dx) of the 4×4 kernel is tap (a, b) of plane (c, dy, dx).
+    let weight = weight
+        .reshape([c_out * c_in, 2, 2, 2, 2]) // [c_out·c_in, a, dy, b, dx]
+        .permute([0, 2, 4, 1, 3])
+        .reshape([c_out, c_in * 4, 2, 2]);
+    shifted_conv(blocks, weight, bias, 1)
 }
 
 /// Transposed 4×4 stride-2 convolution (doubles the size), instance norm.
@@ -505,19 +539,36 @@ mod tests {
         }
     }
 
+    #[test]
+    fn strided_conv_matches_flex_convolution() {
+        let device = Device::flex();
+        for (c_in, c_out, h, w) in [(3, 5, 6, 8), (2, 4, 4, 10)] {
+            let x = Tensor::<4>::random([2, c_in, h, w], Distribution::Default, &device);
+            let bias = Tensor::<1>::random([c_out], Distribution::Default, &device);
+            let weight = Tensor::<4>::random([c_out, c_in, 4, 4], Distribution::Default, &device);
+            let options = ConvOptions::new([2, 2], [1, 1], [1, 1], 1);
+            let reference = conv2d(x.clone(), weight.clone(), Some(bias.clone()), options);
+            let ours = strided_conv(x, weight, Some(bias));
+            assert_eq!(ours.dims(), [2, c_out, h / 2, w / 2]);
+            let err = (ours - reference).abs().max().into_scalar::<f32>();
+            assert!(err < 1e-4, "{c_in}→{c_out}: {err}");
+        }
+    }
+
     /// Both formulations of the layers that have two (reflection padding, wide stride-1
-    /// convolutions), values and input gradients.
+    /// convolutions, stride-2 convolutions), values and input gradients.
     #[test]
     fn sliced_and_plain_formulations_agree_in_value_and_gradient() {
         let device = Device::flex().autodiff();
         let planes = SHIFTED_MIN_INPUT_PLANES;
         // A varied input: on a constant one, reflection keeps every map constant and instance
         // norm divides rounding noise by a near-zero spread.
-        let input = Tensor::<4>::random([1, 7, 10, 10], Distribution::Default, &device);
-        let run = |formulation: Formulation, block: &ResBlock, head: &ConvNorm| {
+        let input = Tensor::<4>::random([1, 7, 16, 16], Distribution::Default, &device);
+        let run = |formulation: Formulation, block: &ResBlock, head: &ConvNorm, down: &ConvNorm| {
             formulation.set();
             let x = input.clone().detach().require_grad();
-            let y = block.forward(head.forward(x.clone(), &mut NoProbe), &mut NoProbe);
+            let y = head.forward(x.clone(), &mut NoProbe);
+            let y = block.forward(down.forward(y, &mut NoProbe), &mut NoProbe);
             let grads = y.clone().powf_scalar(2.0).sum().backward();
             let dx = x.grad(&grads).unwrap();
             Formulation::Auto.set();
@@ -539,8 +590,21 @@ mod tests {
                 padding,
                 &device,
             );
-            let (ys, dxs) = run(Formulation::Sliced, &block, &head);
-            let (yp, dxp) = run(Formulation::Plain, &block, &head);
+            let down = ConvNorm::new(
+                ConvSpec {
+                    channels: [planes, planes],
+                    kernel: 4,
+                    stride: 2,
+                    dilation: 1,
+                    pad: 1,
+                    norm: true,
+                    kind: LayerKind::ConvDown,
+                },
+                padding,
+                &device,
+            );
+            let (ys, dxs) = run(Formulation::Sliced, &block, &head, &down);
+            let (yp, dxp) = run(Formulation::Plain, &block, &head, &down);
             // Relative to the largest entry, since the random weights set the scale: measured
             // 4e-7 to 8e-7 apart (rounding of sums taken in another order).
             let relative = |a: Tensor<4>, b: Tensor<4>| {

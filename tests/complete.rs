@@ -299,6 +299,24 @@ fn the_built_in_model_completes_out_of_the_box() {
             "1.5 is not a probability between 0 and 1",
         ));
     assert!(!refused.exists());
+    // Next to the measured and mirrored points only what the network is sure of fills; with
+    // the near band off (no wider than the merge distance) the doubtful points come back.
+    let doubtful = completed(&dir, &input, "doubtful.ply", &["--near-distance", "0"]);
+    assert!(doubtful.len() > out.len());
+    mvpcc()
+        .args([
+            "complete",
+            s(&input),
+            s(&refused),
+            "--near-occupancy",
+            "1.5",
+        ])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "1.5 is not a probability between 0 and 1",
+        ));
+    assert!(!refused.exists());
     // A NaN or negative σ made the outlier filter remove every point or most of them.
     for sigma in ["nan", "-1"] {
         mvpcc()

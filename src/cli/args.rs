@@ -366,6 +366,25 @@ pub struct CompleteArgs {
         default_value_t = Options::default().merge_distance
     )]
     pub merge_distance: f64,
+    /// A completed point nearer than this to a measured or mirrored one (and beyond the merge
+    /// distance) is added only where the network is sure of it (--near-occupancy): next to
+    /// what was measured a doubtful point costs more than it fills. A share of the object's
+    /// size; the merge distance or less turns it off.
+    #[arg(
+        long,
+        value_name = "D",
+        value_parser = distance,
+        default_value_t = Options::default().near_distance
+    )]
+    pub near_distance: f64,
+    /// The occupancy (a probability) a completed point within --near-distance needs.
+    #[arg(
+        long,
+        value_name = "P",
+        value_parser = probability,
+        default_value_t = Options::default().near_occupancy
+    )]
+    pub near_occupancy: f64,
     /// The network's points further than this above or below the measured points, or beyond
     /// the width they and their mirror images span, are dropped; a share of the object's size,
     /// `inf` keeps them all.

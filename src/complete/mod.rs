@@ -77,6 +77,14 @@ pub struct Options {
     /// the network's unit box: a distance, not pixels, so that models of every view size fill
     /// the same gaps.
     pub merge_distance: f64,
+    /// A completed point nearer than this to a measured or mirrored point (and beyond
+    /// `merge_distance`) is added only where the network is sure of it, its occupancy above
+    /// `near_occupancy`: next to what was measured a wrong point costs precision and fills
+    /// little (docs/completing.md, *Sure near the surface*). In the network's unit box; at or
+    /// below `merge_distance` every completed point passes the model's threshold alone.
+    pub near_distance: f64,
+    /// The occupancy (a probability) a completed point within `near_distance` needs.
+    pub near_occupancy: f64,
     /// The network's points further than this above or below the measured points, or beyond
     /// the width they and their mirror images span, are dropped (in the network's unit box;
     /// infinite keeps them all).
@@ -129,6 +137,8 @@ impl Default for Options {
             sor: SorParams::default(),
             keep_input: true,
             merge_distance: 0.05,
+            near_distance: 0.12,
+            near_occupancy: 0.5,
             box_margin: 0.025,
             thin: 0.03125,
             symmetry: true,
@@ -373,17 +383,11 @@ pub fn complete(
     let mut views = None;
     if options.method == Method::Network {
         let inpainter = inpainter.ok_or(CompleteError::NoModel)?;
-        let network = run_network(input, &measured, plane, inpainter, options, &mut timings)?;
+        let mut network = run_network(input, &measured, plane, inpainter, options, &mut timings)?;
         filtered_out = network.filtered_out;
-        views = network.views;
+        views = network.views.take();
         let start = Instant::now();
-        added = with_network(
-            &measured,
-            &measured_index,
-            added,
-            &network.predicted,
-            options,
-        );
+        added = with_network(&measured, &measured_index, added, &network, options);
         timings.reprojection += start.elapsed();
     }
 
@@ -436,13 +440,14 @@ fn with_network(
     measured: &[[f64; 3]],
     measured_index: &KnnIndex,
     mut added: Vec<Added>,
-    predicted: &PointCloud,
+    network: &NetworkOutput,
     options: &Options,
 ) -> Vec<Added> {
     if !options.keep_input {
-        return network_points(predicted, measured_index);
+        return network_points(&network.predicted, measured_index);
     }
-    let fill = gap_fill(measured, &added, predicted, options);
+    let sure = network.sure.as_ref();
+    let fill = gap_fill(measured, &added, &network.predicted, sure, options);
     added.extend(network_points(&fill, measured_index));
     added
 }
@@ -516,6 +521,9 @@ fn mirror_images(measured: &[[f64; 3]], index: &KnnIndex, plane: Plane) -> Vec<A
 /// network's box).
 struct NetworkOutput {
     predicted: PointCloud,
+    /// The same from the pixels of occupancy above [`Options::near_occupancy`], when the near
+    /// band needs them.
+    sure: Option<PointCloud>,
     filtered_out: usize,
     views: Option<NetworkViews>,
 }
@@ -543,41 +551,88 @@ fn run_network(
     let batch = [project(&points, input.colors.as_deref(), &cameras)];
     timings.projection = start.elapsed();
 
-    let (mut out, stages) = inpainter.inpaint_timed(&batch)?;
+    let (generated, stages) = inpainter.generate_timed(&batch)?;
     timings.encoder = stages.encoder;
     timings.fusion = stages.fusion;
     timings.decoder = stages.decoder;
 
-    let start = Instant::now();
-    let mut inpainted = out.pop().expect("one object in, one out");
+    let threshold = inpainter.config().occupancy_threshold();
+    let mut inpainted = inpainter.views_at(&batch, &generated, threshold);
+    let inpainted = inpainted.pop().expect("one object in, one out");
     let views = options.keep_views.then(|| NetworkViews {
         input: batch[0].clone(),
         output: inpainted.clone(),
     });
     // The pixels a copying generator took from its input are measured points.
     let copied = inpainter.config().copies_input().then_some(&batch[0]);
-    if options.snap {
-        snap_to_rays(&mut inpainted, &cameras, copied);
-    }
-    let reproject_options = ReprojectOptions {
-        erode: options.erode,
-        smooth: options.smooth,
-        ..ReprojectOptions::default()
+    let network = Network {
+        cameras: &cameras,
+        copied,
+        measured,
+        plane,
+        options,
     };
-    let predicted = reproject_keeping(&inpainted, reproject_options, copied);
-    timings.reprojection = start.elapsed();
-
-    let start = Instant::now();
-    let keep = inliers(&predicted.positions, options.sor);
-    let mut predicted = predicted.filter(&keep);
-    let outside = drop_outside_box(&mut predicted, measured, plane, options.box_margin);
-    let filtered_out = keep.iter().filter(|&&k| !k).count() + outside;
-    timings.filter = start.elapsed();
+    let (predicted, filtered_out) = network.points(inpainted, timings);
+    let sure = near_band(options, threshold).then(|| {
+        let mut views = inpainter.views_at(&batch, &generated, options.near_occupancy);
+        network
+            .points(views.pop().expect("one object in, one out"), timings)
+            .0
+    });
     Ok(NetworkOutput {
         predicted,
+        sure,
         filtered_out,
         views,
     })
+}
+
+/// Whether completed points near the measured and mirrored ones need more than the model's
+/// occupancy `threshold` ([`Options::near_distance`]).
+fn near_band(options: &Options, threshold: f64) -> bool {
+    options.keep_input
+        && options.near_distance > options.merge_distance
+        && options.near_occupancy > threshold
+}
+
+/// What turns inpainted views into the network's points.
+struct Network<'a> {
+    cameras: &'a [Camera],
+    /// The input views, when the generator copies their pixels.
+    copied: Option<&'a ViewImages>,
+    measured: &'a [[f64; 3]],
+    plane: Option<Plane>,
+    options: &'a Options,
+}
+
+impl Network<'_> {
+    /// Snapping, re-projection, the outlier filter and the network's box, timed; the points and
+    /// how many the filter and the box removed.
+    fn points(&self, mut inpainted: ViewImages, timings: &mut Timings) -> (PointCloud, usize) {
+        let start = Instant::now();
+        if self.options.snap {
+            snap_to_rays(&mut inpainted, self.cameras, self.copied);
+        }
+        let reproject_options = ReprojectOptions {
+            erode: self.options.erode,
+            smooth: self.options.smooth,
+            ..ReprojectOptions::default()
+        };
+        let predicted = reproject_keeping(&inpainted, reproject_options, self.copied);
+        timings.reprojection += start.elapsed();
+
+        let start = Instant::now();
+        let keep = inliers(&predicted.positions, self.options.sor);
+        let mut predicted = predicted.filter(&keep);
+        let outside = drop_outside_box(
+            &mut predicted,
+            self.measured,
+            self.plane,
+            self.options.box_margin,
+        );
+        timings.filter += start.elapsed();
+        (predicted, keep.iter().filter(|&&k| !k).count() + outside)
+    }
 }
 
 /// Drops the network's points lying more than `margin` beyond the measured points' height or
@@ -612,33 +667,47 @@ fn drop_outside_box(
     dropped
 }
 
-/// The network's points where neither a measured point nor an added mirror image lies within
-/// the merge distance, thinned to one per cube of side `thin` (see [`thin::one_per_cube`]).
+/// The network's points in the gaps the measured points and the added mirror images leave:
+/// beyond the merge distance of every one of them, and within the near distance only those of
+/// `sure` (when the near band is on; see [`Options::near_distance`]); thinned to one per cube
+/// of side `thin` (see [`thin::one_per_cube`]).
 fn gap_fill(
     measured: &[[f64; 3]],
     added: &[Added],
     predicted: &PointCloud,
+    sure: Option<&PointCloud>,
     options: &Options,
-) -> PointCloud {
-    let gaps = uncovered(measured, added, predicted, options.merge_distance);
-    gaps.select(&thin::one_per_cube(&gaps.positions, options.thin))
-}
-
-/// The network's points with no measured point or added mirror image within `tolerance`.
-fn uncovered(
-    measured: &[[f64; 3]],
-    added: &[Added],
-    predicted: &PointCloud,
-    tolerance: f64,
 ) -> PointCloud {
     let mut covered = measured.to_vec();
     covered.extend(added.iter().map(|a| a.position));
-    let keep: Vec<bool> = KnnIndex::new(&covered)
-        .nearest(&predicted.positions)
-        .into_iter()
-        .map(|(_, d)| d > tolerance)
-        .collect();
-    predicted.filter(&keep)
+    let index = KnnIndex::new(&covered);
+    // The points whose nearest covered point lies further than `near` and at most `far`.
+    let between = |cloud: &PointCloud, near: f64, far: f64| {
+        let keep: Vec<bool> = index
+            .nearest(&cloud.positions)
+            .into_iter()
+            .map(|(_, d)| d > near && d <= far)
+            .collect();
+        cloud.filter(&keep)
+    };
+    let merge = options.merge_distance;
+    let gaps = match sure {
+        None => between(predicted, merge, f64::INFINITY),
+        Some(sure) => joined(
+            between(predicted, options.near_distance, f64::INFINITY),
+            between(sure, merge, options.near_distance),
+        ),
+    };
+    gaps.select(&thin::one_per_cube(&gaps.positions, options.thin))
+}
+
+/// `a`'s points followed by `b`'s: two clouds of the network's, positions and colours alone.
+fn joined(mut a: PointCloud, b: PointCloud) -> PointCloud {
+    a.positions.extend(b.positions);
+    if let (Some(colors), Some(more)) = (a.colors.as_mut(), b.colors) {
+        colors.extend(more);
+    }
+    a
 }
 
 /// The network's points, each taking its attributes from its nearest measured point.
@@ -1062,6 +1131,27 @@ mod tests {
             assert!(all.contains(p));
             assert!(cubes.insert(p.map(|c| (c / 0.1).floor() as i64)));
         }
+    }
+
+    #[test]
+    fn near_the_covered_points_only_sure_points_fill() {
+        let measured = [[0.0, 0.0, 0.0]];
+        let at =
+            |xs: &[f64]| PointCloud::from_positions(xs.iter().map(|&x| [x, 0.0, 0.0]).collect());
+        // Within the merge distance, in the near band, beyond it.
+        let predicted = at(&[0.03, 0.07, 0.12]);
+        let sure = at(&[0.03, 0.08, 0.12]);
+        let options = Options {
+            merge_distance: 0.05,
+            near_distance: 0.09,
+            thin: 0.0,
+            ..options(Method::Network)
+        };
+        let xs = |cloud: PointCloud| cloud.positions.iter().map(|p| p[0]).collect::<Vec<_>>();
+        let fill = gap_fill(&measured, &[], &predicted, Some(&sure), &options);
+        assert_eq!(xs(fill), [0.12, 0.08]);
+        let fill = gap_fill(&measured, &[], &predicted, None, &options);
+        assert_eq!(xs(fill), [0.07, 0.12]);
     }
 
     #[test]

@@ -36,6 +36,14 @@ pub struct StageTimes {
     pub decoder: Duration,
 }
 
+/// What the generator made of a batch, before any occupancy threshold: per object and view the
+/// channels' planes and the occupancy logits.
+#[derive(Debug, Clone, Default)]
+pub struct Generated {
+    images: Vec<f32>,
+    logits: Vec<f32>,
+}
+
 /// Appends one object's network input: per view the channels' planes (geometry shifted into
 /// [0, 1] like the dataset's PNGs, empty pixels 0) and its occupancy plane.
 ///
@@ -137,9 +145,20 @@ impl Inpainter {
         &self,
         batch: &[ViewImages],
     ) -> Result<(Vec<ViewImages>, StageTimes), InpaintError> {
+        let (generated, times) = self.generate_timed(batch)?;
+        let views = self.views_at(batch, &generated, self.config.occupancy_threshold());
+        Ok((views, times))
+    }
+
+    /// The generator's output for a batch, from which [`Self::views_at`] cuts views at any
+    /// occupancy threshold; timed as [`Self::inpaint_timed`].
+    pub fn generate_timed(
+        &self,
+        batch: &[ViewImages],
+    ) -> Result<(Generated, StageTimes), InpaintError> {
         let mut times = StageTimes::default();
         if batch.is_empty() {
-            return Ok((Vec::new(), times));
+            return Ok((Generated::default(), times));
         }
         let input = self.input_tensor(batch)?; // [B, V, C+1, S, S]
         let sync = |device: &Device| device.sync().map_err(|e| InpaintError::Device(e.into()));
@@ -168,7 +187,7 @@ impl Inpainter {
             .try_into_vec::<f32>()
             .expect("the generator returns f32");
         times.decoder = start.elapsed();
-        Ok((self.output_views(batch, &images, &logits), times))
+        Ok((Generated { images, logits }, times))
     }
 
     /// # Shapes
@@ -203,16 +222,23 @@ impl Inpainter {
         ))
     }
 
-    fn output_views(
+    /// The views of `batch` the generator made (`generated`), a pixel occupied where its
+    /// predicted occupancy exceeds `threshold` (a probability).
+    pub fn views_at(
         &self,
         batch: &[ViewImages],
-        images: &[f32],
-        logits: &[f32],
+        generated: &Generated,
+        threshold: f64,
     ) -> Vec<ViewImages> {
         let (v, s) = (self.config.views, self.config.size);
         let c = self.config.channels.count();
         let plane = s * s;
-        let cut = self.config.occupancy_logit();
+        let cut = self
+            .config
+            .clone()
+            .with_occupancy(Some(threshold))
+            .occupancy_logit();
+        let (images, logits) = (&generated.images, &generated.logits);
         batch
             .iter()
             .enumerate()

@@ -143,6 +143,8 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         sor,
         keep_input: !args.no_keep_input,
         merge_distance: args.merge_distance,
+        near_distance: args.near_distance,
+        near_occupancy: args.near_occupancy,
         box_margin: args.box_margin,
         thin: args.thin,
         symmetry: !args.no_symmetry,

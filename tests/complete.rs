@@ -291,47 +291,22 @@ fn the_built_in_model_completes_out_of_the_box() {
     let strict = completed(&dir, &input, "strict.ply", &["--occupancy", "0.9"]);
     assert!(strict.len() < out.len());
     let refused = dir.path().join("refused.ply");
-    mvpcc()
-        .args(["complete", s(&input), s(&refused), "--occupancy", "1.5"])
-        .assert()
-        .failure()
-        .stderr(predicate::str::contains(
-            "1.5 is not a probability between 0 and 1",
-        ));
-    assert!(!refused.exists());
+    let probability = "1.5 is not a probability between 0 and 1";
+    refuses(&input, &refused, "--occupancy=1.5", probability);
     // Next to the measured and mirrored points only what the network is sure of fills; with
     // the near band off (no wider than the merge distance) the doubtful points come back.
     let doubtful = completed(&dir, &input, "doubtful.ply", &["--near-distance", "0"]);
     assert!(doubtful.len() > out.len());
-    mvpcc()
-        .args([
-            "complete",
-            s(&input),
-            s(&refused),
-            "--near-occupancy",
-            "1.5",
-        ])
-        .assert()
-        .failure()
-        .stderr(predicate::str::contains(
-            "1.5 is not a probability between 0 and 1",
-        ));
-    assert!(!refused.exists());
+    refuses(&input, &refused, "--near-occupancy=1.5", probability);
     // A NaN or negative σ made the outlier filter remove every point or most of them.
     for sigma in ["nan", "-1"] {
-        mvpcc()
-            .args([
-                "complete",
-                s(&input),
-                s(&refused),
-                &format!("--sor-std={sigma}"),
-            ])
-            .assert()
-            .failure()
-            .stderr(predicate::str::contains(format!(
-                "{sigma} is not a number of 0 or more"
-            )));
-        assert!(!refused.exists());
+        let option = format!("--sor-std={sigma}");
+        refuses(
+            &input,
+            &refused,
+            &option,
+            &format!("{sigma} is not a number of 0 or more"),
+        );
     }
 
     // Every completed point lies within the box's side of a measured or mirrored one, so a
@@ -359,14 +334,18 @@ fn the_built_in_model_completes_out_of_the_box() {
         .positions
         .iter()
         .all(|p| open.positions.contains(p)));
+    let distance = "-0.1 is not a distance of 0 or more";
+    refuses(&input, &refused, "--merge-distance=-0.1", distance);
+}
+
+/// `complete INPUT OUTPUT OPTION` fails saying `text` and writes nothing.
+fn refuses(input: &Path, output: &Path, option: &str, text: &str) {
     mvpcc()
-        .args(["complete", s(&input), s(&refused), "--merge-distance=-0.1"])
+        .args(["complete", s(input), s(output), option])
         .assert()
         .failure()
-        .stderr(predicate::str::contains(
-            "-0.1 is not a distance of 0 or more",
-        ));
-    assert!(!refused.exists());
+        .stderr(predicate::str::contains(text));
+    assert!(!output.exists());
 }
 
 #[test]

@@ -3,8 +3,9 @@
 //! read → frame → project → inpaint → re-project (eroded) → outlier filter → the network's box →
 //! merge with the measured points → back to the input's frame. The measured points are kept
 //! exactly; completed points are added only where no measured point lies within
-//! `merge_distance` (in the network's box, so the same for every view size), and carry a
-//! `synthetic` flag so a user can tell them apart.
+//! `merge_distance` (in the network's box, so the same for every view size), and within
+//! `near_distance` only where the network is sure of them; they carry a `synthetic` flag so a
+//! user can tell them apart.
 //!
 //! Two baselines run through the same code: `identity` (the partial as it is) and `mirror` (the
 //! partial united with its mirror image across the vehicle's long vertical plane).

@@ -37,8 +37,8 @@ fn train(run: &Path, steps: u64, changes: &[&str]) -> Command {
     let steps = steps.to_string();
     #[rustfmt::skip]
     let mut options = vec![
-        "--batch", "2", "--val-every", "3", "--val-samples", "2", "--log-every", "2",
-        "--checkpoint-every", "4", "--steps", &steps,
+        "--batch", "2", "--val-every", "3", "--val-samples", "2", "--seen-samples", "2",
+        "--log-every", "2", "--checkpoint-every", "4", "--steps", &steps,
     ];
     for change in changes.chunks(2) {
         match options.iter().position(|o| *o == change[0]) {
@@ -105,6 +105,7 @@ fn a_run_writes_its_files_and_resumes_exactly() {
     train(&whole, 8, &[]).assert().success().stderr(
         predicate::str::contains("stopped at step 8")
             .and(predicate::str::contains("validation CD"))
+            .and(predicate::str::contains("; training samples CD"))
             .and(predicate::str::contains(
                 "partial inputs of the 2 validation samples",
             )),
@@ -161,6 +162,14 @@ fn a_run_writes_its_files_and_resumes_exactly() {
         .collect();
     assert_eq!(kinds.iter().filter(|k| *k == "\"train\"").count(), 4);
     assert_eq!(validated_steps(&whole), [3, 6, 8]);
+    // Each validation also scored two training samples, as the validation samples are.
+    for line in log.lines() {
+        let record: serde_json::Value = serde_json::from_str(line).unwrap();
+        if record["kind"] == "validation" {
+            assert_eq!(record["seen"]["samples"], 2, "{line}");
+            assert!(record["seen"]["f1"].as_f64().unwrap() >= 0.0, "{line}");
+        }
+    }
     assert_eq!(kinds[0], "\"baseline\"");
     // The resumed run's log holds no line twice, and the validation of the step it was stopped
     // at (5) did not change what it went on to compute (compared above).

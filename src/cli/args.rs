@@ -727,6 +727,12 @@ pub struct TrainArgs {
     ))]
     pub val_samples: Option<usize>,
     #[arg(long, help = defaulted(
+        "Training samples scored beside the validation samples, to show what the network \
+         memorized; 0 = none",
+        train().seen_samples,
+    ))]
+    pub seen_samples: Option<usize>,
+    #[arg(long, help = defaulted(
         "Share of training models held back for validation when the data has no test split",
         train().val_fraction,
     ))]

@@ -50,6 +50,10 @@ pub struct TrainSettings {
     pub patience: usize,
     pub val_every: u64,
     pub val_samples: usize,
+    /// Training samples scored as the validation samples are, at each validation and without
+    /// augmentation: the gap between the two scores is what the network memorized.
+    #[serde(default)]
+    pub seen_samples: usize,
     /// Fraction of the training models held back for validation when the data has no test
     /// split.
     pub val_fraction: f64,
@@ -209,6 +213,7 @@ impl Default for TrainSettings {
             patience: 5,
             val_every: 500,
             val_samples: 16,
+            seen_samples: 16,
             val_fraction: 0.05,
             checkpoint_every: 500,
             keep: 3,
@@ -362,6 +367,9 @@ pub enum LogRecord {
         step: u64,
         stage: usize,
         scores: Scores,
+        /// The same scores on training samples (`seen_samples`); absent from runs without.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        seen: Option<Scores>,
     },
     /// The partial inputs scored as if they were the output, once per run.
     Baseline { scores: Scores },
@@ -421,6 +429,8 @@ pub struct Summary {
     pub checkpoint: PathBuf,
     pub baseline: Option<Scores>,
     pub last: Option<Scores>,
+    /// The last validation's scores on training samples.
+    pub last_seen: Option<Scores>,
 }
 
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), TrainError> {
@@ -483,11 +493,13 @@ impl RunLog {
     }
 
     /// The run's curves (`losses.png`): three training losses, and three validation scores
-    /// each beside the partial inputs' own.
+    /// (red) each beside the partial inputs' own (grey) and the same score on training samples
+    /// (blue, as the training losses).
     fn draw(&self, run: &Path) -> Result<(), TrainError> {
         let Curves {
             train,
             val,
+            seen,
             base,
             max_x,
         } = Curves::of(&self.records);
@@ -519,6 +531,10 @@ impl RunLog {
                         color: plot::BASELINE,
                     },
                     plot::Series {
+                        points: &seen[i],
+                        color: plot::TRAIN,
+                    },
+                    plot::Series {
                         points: &val[i],
                         color: plot::VALIDATION,
                     },
@@ -532,11 +548,12 @@ impl RunLog {
 }
 
 /// What a run's log holds for its plot: the generator's loss, the discriminator's and L1 per
-/// step, the validation CD, F1 and PSNR per validation, the partial inputs' three scores, and
-/// the last step.
+/// step, the validation CD, F1 and PSNR per validation and the same on training samples, the
+/// partial inputs' three scores, and the last step.
 struct Curves {
     train: [Vec<(f64, f64)>; 3],
     val: [Vec<(f64, f64)>; 3],
+    seen: [Vec<(f64, f64)>; 3],
     base: [Option<f64>; 3],
     max_x: f64,
 }
@@ -546,6 +563,7 @@ impl Curves {
         let mut c = Curves {
             train: Default::default(),
             val: Default::default(),
+            seen: Default::default(),
             base: [None; 3],
             max_x: 1.0,
         };
@@ -558,12 +576,15 @@ impl Curves {
                     c.train[1].push((x, losses.discriminator as f64));
                     c.train[2].push((x, losses.l1 as f64));
                 }
-                LogRecord::Validation { step, scores, .. } => {
+                LogRecord::Validation {
+                    step, scores, seen, ..
+                } => {
                     let x = *step as f64;
                     c.max_x = c.max_x.max(x);
-                    c.val[0].push((x, scores.cd.unwrap_or(f64::NAN)));
-                    c.val[1].push((x, scores.f1));
-                    c.val[2].push((x, scores.geometry.psnr));
+                    push_scores(&mut c.val, x, scores);
+                    if let Some(seen) = seen {
+                        push_scores(&mut c.seen, x, seen);
+                    }
                 }
                 LogRecord::Baseline { scores } => {
                     c.base = [scores.cd, Some(scores.f1), Some(scores.geometry.psnr)];
@@ -572,6 +593,13 @@ impl Curves {
         }
         c
     }
+}
+
+/// The plotted scores (CD, F1, geometry PSNR) of one validation at step `x`.
+fn push_scores(curves: &mut [Vec<(f64, f64)>; 3], x: f64, scores: &Scores) {
+    curves[0].push((x, scores.cd.unwrap_or(f64::NAN)));
+    curves[1].push((x, scores.f1));
+    curves[2].push((x, scores.geometry.psnr));
 }
 
 fn save_png(path: &Path, img: &image::RgbImage) -> Result<(), TrainError> {
@@ -622,8 +650,16 @@ pub fn samples(
 
 struct Validator {
     items: Vec<ValItem>,
+    /// Training samples, scored beside the validation ones (`seen_samples`).
+    seen: Vec<ValItem>,
     device: burn::tensor::Device,
     batch: usize,
+}
+
+/// One validation's scores: on the validation samples, and on the training samples when asked.
+struct Validated {
+    scores: Scores,
+    seen: Option<Scores>,
 }
 
 impl Validator {
@@ -635,32 +671,35 @@ impl Validator {
         (step, stage): (u64, usize),
         monitor: &mut dyn Monitor,
         log: &mut RunLog,
-    ) -> Result<Scores, TrainError> {
-        let scores = self.run(gan, run, step)?;
+    ) -> Result<Validated, TrainError> {
+        let validated = self.run(gan, run, step)?;
         let record = LogRecord::Validation {
             step,
             stage,
-            scores: scores.clone(),
+            scores: validated.scores.clone(),
+            seen: validated.seen.clone(),
         };
         monitor.record(&record);
         log.push(record)?;
-        Ok(scores)
+        Ok(validated)
     }
 
-    fn run(&self, gan: &Gan, run: &Path, step: u64) -> Result<Scores, TrainError> {
+    fn run(&self, gan: &Gan, run: &Path, step: u64) -> Result<Validated, TrainError> {
         let inpainter = Inpainter::new(
             gan.generator.valid(),
             gan.config.clone(),
             self.device.clone(),
         );
         let (scores, outputs) = validate::validate(&inpainter, &self.items, self.batch);
+        let seen = (!self.seen.is_empty())
+            .then(|| validate::validate(&inpainter, &self.seen, self.batch).0);
         let first = &self.items[0];
         let color = scores.color.is_some();
         let grid = plot::sample_grid(&first.input, &outputs[0], &first.target, color);
         let dir = run.join(SAMPLES_DIR);
         std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
         save_png(&dir.join(format!("{step:08}.png")), &grid)?;
-        Ok(scores)
+        Ok(Validated { scores, seen })
     }
 }
 
@@ -811,6 +850,25 @@ mod tests {
     }
 
     #[test]
+    fn seen_scores_are_logged_when_measured_and_plotted_beside_the_validation() {
+        let validation = |step, seen| LogRecord::Validation {
+            step,
+            stage: 0,
+            scores: scores(Some(2.0)),
+            seen,
+        };
+        // Runs without training samples to score (and runs older than them) log no `seen`.
+        let without = serde_json::to_string(&validation(10, None)).unwrap();
+        assert!(!without.contains("seen"), "{without}");
+        let with = serde_json::to_string(&validation(20, Some(scores(Some(1.0))))).unwrap();
+        let records = parse_log(&format!("{without}\n{with}\n"), 20);
+        assert_eq!(records.len(), 2);
+        let curves = Curves::of(&records);
+        assert_eq!(curves.val[0], [(10.0, 2.0), (20.0, 2.0)]);
+        assert_eq!(curves.seen[0], [(20.0, 1.0)]);
+    }
+
+    #[test]
     fn patience_counts_validations_without_a_better_cd() {
         let mut state = TrainState::new();
         state.step = 10;
@@ -842,6 +900,7 @@ mod tests {
                 step,
                 stage: 0,
                 scores: scores(Some(1.0 / step as f64)),
+                seen: None,
             })
             .unwrap();
         }

@@ -7,7 +7,7 @@ use super::loader::{Loader, LoaderPlan};
 use super::validate::{self, Scores};
 use super::{
     advance_on_validation, io_err, samples, write_json, Interval, Job, LogRecord, Monitor, Outcome,
-    RunLog, Summary, TrainError, Validator, CONFIG_FILE, SETTINGS_FILE,
+    RunLog, Summary, TrainError, Validated, Validator, CONFIG_FILE, SETTINGS_FILE,
 };
 use crate::core::camera::Camera;
 use crate::io::atomic_write;
@@ -31,7 +31,7 @@ pub(super) struct Session<'a> {
     /// The partial inputs' own scores on the validation samples.
     baseline: Option<Scores>,
     last_checkpoint: Option<PathBuf>,
-    last_scores: Option<Scores>,
+    last: Option<Validated>,
     interval: Interval,
 }
 
@@ -83,6 +83,11 @@ impl<'a> Session<'a> {
             &cameras,
             &cache,
         )?;
+        let seen_items = validate::build(
+            &validate::pick(&train_samples, settings.seen_samples),
+            &cameras,
+            &cache,
+        )?;
         // Only now: data that is refused must leave no run directory behind.
         std::fs::create_dir_all(run).map_err(io_err(run))?;
         let (mut gan, state) = open_or_resume(job, &autodiff, monitor)?;
@@ -96,6 +101,7 @@ impl<'a> Session<'a> {
         let mut log = RunLog::open(run, state.step)?;
         let validator = (!val_items.is_empty()).then(|| Validator {
             items: val_items,
+            seen: seen_items,
             device: job.device.clone(),
             batch: settings.batch,
         });
@@ -116,7 +122,7 @@ impl<'a> Session<'a> {
             loader,
             baseline,
             last_checkpoint: checkpoint::latest(run)?,
-            last_scores: None,
+            last: None,
             interval: Interval::new(),
         })
     }
@@ -198,10 +204,10 @@ impl<'a> Session<'a> {
             return Ok(false);
         };
         let at = (self.state.step, self.state.stage);
-        let scores = v.run_logged(&self.gan, &self.job.run, at, monitor, &mut self.log)?;
-        let improved = advance_on_validation(&mut self.state, &scores);
+        let validated = v.run_logged(&self.gan, &self.job.run, at, monitor, &mut self.log)?;
+        let improved = advance_on_validation(&mut self.state, &validated.scores);
         self.log.draw(&self.job.run)?;
-        self.last_scores = Some(scores);
+        self.last = Some(validated);
         Ok(improved)
     }
 
@@ -273,7 +279,7 @@ impl<'a> Session<'a> {
                 .stage
                 .min(settings.stage_rates.len().saturating_sub(1));
             let at = (state.step, stage);
-            self.last_scores = Some(v.run_logged(&self.gan, run, at, monitor, &mut self.log)?);
+            self.last = Some(v.run_logged(&self.gan, run, at, monitor, &mut self.log)?);
         }
         let dir = match &self.last_checkpoint {
             Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
@@ -293,7 +299,8 @@ impl<'a> Session<'a> {
             state: self.state,
             checkpoint: dir,
             baseline: self.baseline,
-            last: self.last_scores,
+            last: self.last.as_ref().map(|v| v.scores.clone()),
+            last_seen: self.last.and_then(|v| v.seen),
         })
     }
 }

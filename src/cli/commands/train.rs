@@ -77,7 +77,7 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     }
     set!(batch <- batch, accumulate <- accumulate, stage_steps <- stage_steps,
         patience <- patience, val_every <- val_every, val_samples <- val_samples,
-        val_fraction <- val_fraction, checkpoint_every <- checkpoint_every, keep <- keep,
+        seen_samples <- seen_samples, val_fraction <- val_fraction, checkpoint_every <- checkpoint_every, keep <- keep,
         log_every <- log_every, seed <- seed, tv_from_stage <- tv_from_stage,
         warmup_steps <- warmup_steps);
     let loss = &mut s.loss;
@@ -244,15 +244,22 @@ impl Monitor for Progress {
     fn record(&mut self, record: &LogRecord) {
         let line = match record {
             LogRecord::Train { .. } => return,
-            LogRecord::Validation { step, scores, .. } => format!(
-                "step {step}: validation CD {} F1@0.01 {:.3} (P {:.3} R {:.3}), geometry PSNR {:.2} dB SSIM {:.3}{}",
-                scores.cd.map_or("- (empty output)".to_string(), |c| format!("{c:.3e}")),
+            LogRecord::Validation {
+                step, scores, seen, ..
+            } => format!(
+                "step {step}: validation CD {} F1@0.01 {:.3} (P {:.3} R {:.3}), geometry PSNR {:.2} dB SSIM {:.3}{}{}",
+                cd_text(scores.cd),
                 scores.f1,
                 scores.precision,
                 scores.recall,
                 scores.geometry.psnr,
                 scores.geometry.ssim,
                 scores.color.map_or(String::new(), |c| format!(", colour PSNR {:.2} dB", c.psnr)),
+                seen.as_ref().map_or(String::new(), |s| format!(
+                    "; training samples CD {} F1@0.01 {:.3}",
+                    cd_text(s.cd),
+                    s.f1
+                )),
             ),
             LogRecord::Baseline { scores } => format!(
                 "partial inputs of the {} validation samples: CD {} F1@0.01 {:.3}",
@@ -269,6 +276,10 @@ impl Monitor for Progress {
     fn interrupted(&self) -> bool {
         self.stop.load(Ordering::SeqCst)
     }
+}
+
+fn cd_text(cd: Option<f64>) -> String {
+    cd.map_or("- (empty output)".to_string(), |c| format!("{c:.3e}"))
 }
 
 fn default_run(data: &Path) -> PathBuf {
@@ -369,6 +380,7 @@ fn report(
             "best_step": summary.state.best_step,
             "baseline": summary.baseline,
             "validation": summary.last,
+            "seen": summary.last_seen,
         });
         println!("{}", serde_json::to_string_pretty(&json)?);
     }

@@ -1,5 +1,7 @@
 //! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient and
-//! complete with the built-in models, write; and the parts users can switch off. With
+//! complete with the built-in models, write; and the parts users can switch off. A dense scan of
+//! one side (half a million points, as a survey-grade scanner gives a bus) is timed with the
+//! mirror alone: the network's time does not depend on the points, the geometric stages do. With
 //! `MVPCC_BENCH_MODEL=FILE` (a generator's weights, such as a relay leg's) the network method is
 //! timed with that model too, in the same run, so a candidate's cost is compared with the
 //! built-in model's on the same machine state (docs/training.md).
@@ -7,8 +9,10 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::complete::orient::{OrientMode, Orienter};
 use mvpcc::complete::{Completer, Method, Options, Settings};
+use mvpcc::datagen::shapes;
 use mvpcc::io::{read_cloud, write_cloud, Encoding};
 use mvpcc::model::inpaint::Inpainter;
+use std::path::Path;
 use std::time::Duration;
 
 mod common;
@@ -46,23 +50,46 @@ fn end_to_end(c: &mut Criterion) {
         for (method, model, completer) in runs.chain([(Method::Mirror, "", &completers[0].1)]) {
             let label = format!("{method:?}{model}: read, orient, complete, write");
             group.bench_function(label, |b| {
-                b.iter(|| {
-                    let cloud = read_cloud(&input, None).unwrap().cloud;
-                    let settings = Settings {
-                        clean: false,
-                        orient: OrientMode::Auto,
-                        options: Options {
-                            method,
-                            ..Options::default()
-                        },
-                    };
-                    let run = completer.run(&cloud, &settings).unwrap();
-                    write_cloud(&output, &run.completion.cloud, None, Encoding::Binary).unwrap();
-                })
+                b.iter(|| complete_file(&input, &output, completer, method))
             });
         }
         group.finish();
     }
+    dense_side(c, &completers[0].1);
+}
+
+fn dense_side(c: &mut Criterion, completer: &Completer) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("scan.ply");
+    let output = dir.path().join("done.ply");
+    let side = shapes::scanned_side(&shapes::car(1_000_000, 2));
+    write_cloud(&input, &side, None, Encoding::Binary).unwrap();
+    let mut group = c.benchmark_group(format!(
+        "complete {} points (one side of a generated car)",
+        side.len()
+    ));
+    group
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(10));
+    group.bench_function("Mirror: read, orient, complete, write", |b| {
+        b.iter(|| complete_file(&input, &output, completer, Method::Mirror))
+    });
+    group.finish();
+}
+
+/// What `mvpcc complete IN OUT --method M` does.
+fn complete_file(input: &Path, output: &Path, completer: &Completer, method: Method) {
+    let cloud = read_cloud(input, None).unwrap().cloud;
+    let settings = Settings {
+        clean: false,
+        orient: OrientMode::Auto,
+        options: Options {
+            method,
+            ..Options::default()
+        },
+    };
+    let run = completer.run(&cloud, &settings).unwrap();
+    write_cloud(output, &run.completion.cloud, None, Encoding::Binary).unwrap();
 }
 
 criterion_group!(benches, end_to_end);

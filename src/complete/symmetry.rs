@@ -7,7 +7,7 @@
 //! counted; otherwise a flat side would always be "symmetric" about itself.
 
 use crate::core::cloud::Aabb;
-use crate::core::knn::KnnIndex;
+use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
@@ -581,106 +581,6 @@ impl Sample {
 /// `p` mirrored across `x = offset`.
 pub fn mirror(p: [f64; 3], offset: f64) -> [f64; 3] {
     [2.0 * offset - p[0], p[1], p[2]]
-}
-
-/// Points bucketed in cubic cells as large as the match distance, so "the nearest point closer
-/// than it" reads the 3×3×3 cells around a query: the searches ask it a few hundred thousand times,
-/// where a k-d tree query each took most of `complete`'s symmetry time.
-struct MatchGrid {
-    origin: [f64; 3],
-    cell: f64,
-    distance: f64,
-    dims: [usize; 3],
-    /// `points[starts[i]..starts[i + 1]]` lie in cell `i`.
-    starts: Vec<u32>,
-    points: Vec<[f64; 3]>,
-}
-
-/// Cells a grid may have; a sample spread over more (far outliers) gets coarser cells, which
-/// only costs time.
-const MAX_CELLS: usize = 1 << 22;
-
-impl MatchGrid {
-    fn new(points: &[[f64; 3]], distance: f64) -> MatchGrid {
-        let Aabb { min: lo, max: hi } =
-            Aabb::of(points).expect("a sample holds at least two points");
-        let mut cell = distance;
-        let dims = loop {
-            let dims = [0, 1, 2].map(|i| ((hi[i] - lo[i]) / cell) as usize + 1);
-            if dims.iter().product::<usize>() <= MAX_CELLS {
-                break dims;
-            }
-            cell *= 2.0;
-        };
-        let mut grid = MatchGrid {
-            origin: lo,
-            cell,
-            distance,
-            dims,
-            starts: vec![0; dims.iter().product::<usize>() + 1],
-            points: Vec::with_capacity(points.len()),
-        };
-        let cells: Vec<usize> = points
-            .iter()
-            .map(|p| grid.cell_of(p).expect("a point lies in its own box"))
-            .collect();
-        for &c in &cells {
-            grid.starts[c + 1] += 1;
-        }
-        for i in 1..grid.starts.len() {
-            grid.starts[i] += grid.starts[i - 1];
-        }
-        let mut order: Vec<usize> = (0..points.len()).collect();
-        order.sort_by_key(|&i| cells[i]);
-        grid.points = order.into_iter().map(|i| points[i]).collect();
-        grid
-    }
-
-    /// Cell coordinates, clamped just outside the grid so neighbours of far queries stay in
-    /// range.
-    fn coords(&self, p: &[f64; 3]) -> [i64; 3] {
-        [0, 1, 2].map(|i| {
-            let c = ((p[i] - self.origin[i]) / self.cell).floor();
-            c.clamp(-2.0, self.dims[i] as f64 + 1.0) as i64
-        })
-    }
-
-    fn cell_of(&self, p: &[f64; 3]) -> Option<usize> {
-        self.index(self.coords(p))
-    }
-
-    fn index(&self, c: [i64; 3]) -> Option<usize> {
-        let inside = (0..3).all(|i| c[i] >= 0 && (c[i] as usize) < self.dims[i]);
-        inside
-            .then(|| (c[0] as usize * self.dims[1] + c[1] as usize) * self.dims[2] + c[2] as usize)
-    }
-
-    /// The squared distance from `q` to its nearest point when that is strictly closer than
-    /// the grid's match distance. Cells are at least that large, so the ball around `q` lies
-    /// in the 3×3×3 cells around the one `q` is in.
-    fn nearest_within(&self, q: [f64; 3]) -> Option<f64> {
-        let mut best = self.distance * self.distance;
-        let mut found = false;
-        let c = self.coords(&q);
-        for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    let Some(i) = self.index([c[0] + dx, c[1] + dy, c[2] + dz]) else {
-                        continue;
-                    };
-                    for p in &self.points[self.starts[i] as usize..self.starts[i + 1] as usize] {
-                        let d = [0, 1, 2].map(|k| p[k] - q[k]);
-                        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-                        if d2 < best {
-                            best = d2;
-                            found = true;
-                        }
-                    }
-                }
-            }
-        }
-        found.then_some(best)
-    }
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 //! cell. A result is exact whenever its k-th distance is within the block; the few queries where
 //! it is not (sparse regions, isolated points) go to kiddo's k-d tree ([`KnnIndex`]).
 
+use crate::core::cloud::Aabb;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZero;
@@ -151,7 +152,7 @@ impl Grid {
     /// the square of the cell size).
     fn build(points: &[[f64; 3]], per_cell: f64) -> Option<Grid> {
         let max_cells = MAX_CELLS_PER_POINT * points.len();
-        let b = crate::core::cloud::Aabb::of(points)?;
+        let b = Aabb::of(points)?;
         let e = b.extent();
         let volume: f64 = e.iter().map(|v| v.max(1e-9)).product();
         let coarse = 4.0 * (volume / points.len() as f64).cbrt();
@@ -344,6 +345,115 @@ pub fn knn_distances(points: &[[f64; 3]], queries: &[[f64; 3]], k: usize) -> Vec
     out
 }
 
+/// Points bucketed in cubic cells at least as large as a match distance, so "the nearest point
+/// closer than it" reads the 3×3×3 cells around a query. Where most queries have nothing that
+/// close (the mirror images of a one-sided scan, the symmetry search's candidates), a k-d tree
+/// walks far from each before it can say so: that took most of `complete`'s symmetry time.
+pub struct MatchGrid {
+    origin: [f64; 3],
+    cell: f64,
+    distance: f64,
+    dims: [usize; 3],
+    /// `points[starts[i]..starts[i + 1]]` lie in cell `i`.
+    starts: Vec<u32>,
+    points: Vec<[f64; 3]>,
+}
+
+/// Cells a [`MatchGrid`] may have; points spread over more (far outliers) get coarser cells,
+/// which only costs time.
+const MAX_MATCH_CELLS: usize = 1 << 22;
+
+impl MatchGrid {
+    /// The grid over `points` (not empty) for matches closer than `distance`; a distance that
+    /// is not positive matches nothing.
+    pub fn new(points: &[[f64; 3]], distance: f64) -> MatchGrid {
+        let Aabb { min: lo, max: hi } = Aabb::of(points).expect("a grid needs at least one point");
+        // A zero cell would never grow below; NaN and zero distances find no match either way.
+        let mut cell = if distance > 0.0 {
+            distance
+        } else {
+            f64::MIN_POSITIVE
+        };
+        let dims = loop {
+            let dims = [0, 1, 2]
+                .map(|i| ((hi[i] - lo[i]) / cell).min(MAX_MATCH_CELLS as f64) as usize + 1);
+            // In floats: three sides of up to MAX_MATCH_CELLS overflow a usize product.
+            if dims.iter().map(|&d| d as f64).product::<f64>() <= MAX_MATCH_CELLS as f64 {
+                break dims;
+            }
+            cell *= 2.0;
+        };
+        let mut grid = MatchGrid {
+            origin: lo,
+            cell,
+            distance: distance.max(0.0),
+            dims,
+            starts: vec![0; dims.iter().product::<usize>() + 1],
+            points: Vec::with_capacity(points.len()),
+        };
+        let cells: Vec<usize> = points
+            .iter()
+            .map(|p| grid.cell_of(p).expect("a point lies in its own box"))
+            .collect();
+        for &c in &cells {
+            grid.starts[c + 1] += 1;
+        }
+        for i in 1..grid.starts.len() {
+            grid.starts[i] += grid.starts[i - 1];
+        }
+        let mut order: Vec<usize> = (0..points.len()).collect();
+        order.sort_by_key(|&i| cells[i]);
+        grid.points = order.into_iter().map(|i| points[i]).collect();
+        grid
+    }
+
+    /// Cell coordinates, clamped just outside the grid so neighbours of far queries stay in
+    /// range.
+    fn coords(&self, p: &[f64; 3]) -> [i64; 3] {
+        [0, 1, 2].map(|i| {
+            let c = ((p[i] - self.origin[i]) / self.cell).floor();
+            c.clamp(-2.0, self.dims[i] as f64 + 1.0) as i64
+        })
+    }
+
+    fn cell_of(&self, p: &[f64; 3]) -> Option<usize> {
+        self.index(self.coords(p))
+    }
+
+    fn index(&self, c: [i64; 3]) -> Option<usize> {
+        let inside = (0..3).all(|i| c[i] >= 0 && (c[i] as usize) < self.dims[i]);
+        inside
+            .then(|| (c[0] as usize * self.dims[1] + c[1] as usize) * self.dims[2] + c[2] as usize)
+    }
+
+    /// The squared distance from `q` to its nearest point when that is strictly closer than
+    /// the grid's match distance. Cells are at least that large, so the ball around `q` lies
+    /// in the 3×3×3 cells around the one `q` is in.
+    pub fn nearest_within(&self, q: [f64; 3]) -> Option<f64> {
+        let mut best = self.distance * self.distance;
+        let mut found = false;
+        let c = self.coords(&q);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(i) = self.index([c[0] + dx, c[1] + dy, c[2] + dz]) else {
+                        continue;
+                    };
+                    for p in &self.points[self.starts[i] as usize..self.starts[i + 1] as usize] {
+                        let d = [0, 1, 2].map(|k| p[k] - q[k]);
+                        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                        if d2 < best {
+                            best = d2;
+                            found = true;
+                        }
+                    }
+                }
+            }
+        }
+        found.then_some(best)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,6 +505,44 @@ mod tests {
                     assert!((slow[qi * k + j] - d[j]).abs() < 1e-12);
                 }
             }
+        }
+    }
+
+    #[test]
+    fn match_grid_finds_exactly_the_points_closer_than_its_distance() {
+        let mut rng = crate::core::rng::Lcg::new(5);
+        let mut rnd = || rng.next_f64();
+        let mut points: Vec<[f64; 3]> = (0..3000).map(|_| [rnd(), 0.3 * rnd(), rnd()]).collect();
+        let queries: Vec<[f64; 3]> = (0..400)
+            .map(|_| [2.0 * rnd() - 0.5, rnd() - 0.3, 2.0 * rnd() - 0.5])
+            .chain([[50.0, 0.0, 0.0], [-3.0, 7.0, 0.5]])
+            .collect();
+        let brute = |points: &[[f64; 3]], q: &[f64; 3], distance: f64| {
+            points
+                .iter()
+                .map(|p| (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>())
+                .filter(|&d2| d2 < distance * distance)
+                .min_by(f64::total_cmp)
+        };
+        // Far points coarsen the cells past the match distance; it must not change an answer.
+        for far in [false, true] {
+            if far {
+                points.extend([[1e4, 0.0, 0.0], [0.0, -1e4, 1e4]]);
+            }
+            for distance in [0.004, 0.03, 0.2] {
+                let grid = MatchGrid::new(&points, distance);
+                for q in &queries {
+                    assert_eq!(
+                        grid.nearest_within(*q),
+                        brute(&points, q, distance),
+                        "{q:?}"
+                    );
+                }
+            }
+        }
+        for distance in [0.0, -1.0, f64::NAN] {
+            let grid = MatchGrid::new(&points, distance);
+            assert_eq!(grid.nearest_within(points[0]), None, "distance {distance}");
         }
     }
 

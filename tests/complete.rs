@@ -524,6 +524,23 @@ fn odd_inputs_warn_and_tiny_ones_fail_cleanly() {
         .stderr(predicate::str::contains("warning").and(predicate::str::contains("pole.ply")));
     assert!(output.exists());
 
+    // One stray return far off: the warning names it and the way out, and --clean takes it.
+    let mut stray = PointCloud::from_positions(scan(9).positions);
+    stray.positions.push([500.0, 0.0, 0.0]);
+    let input = write(&dir, "stray.ply", &stray);
+    let output = dir.path().join("stray_done.ply");
+    let base = ["complete", s(&input), s(&output), "--method", "mirror"];
+    mvpcc().args(base).assert().success().stderr(
+        predicate::str::contains("stray.ply: 1 point(s) lie far from the rest")
+            .and(predicate::str::contains("--clean")),
+    );
+    mvpcc()
+        .args(base)
+        .arg("--clean")
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("far from the rest").not());
+
     let few = PointCloud {
         positions: (0..20).map(|i| [i as f64, 0.0, 1.0]).collect(),
         ..Default::default()

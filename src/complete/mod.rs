@@ -830,6 +830,14 @@ fn distribution_warnings(points: &[[f64; 3]]) -> Vec<String> {
             points.len()
         ));
     }
+    // The shape's spreads below would describe the strays' box, not the vehicle.
+    if let Some(strays) = stray_points(points) {
+        warnings.push(format!(
+            "{strays} point(s) lie far from the rest (stray returns?) and set the cloud's box, so \
+             the vehicle fills a small part of the model's: --clean drops isolated points"
+        ));
+        return warnings;
+    }
     let n = points.len() as f64;
     let mean = points.iter().fold([0.0; 3], |m, p| {
         [m[0] + p[0] / n, m[1] + p[1] / n, m[2] + p[2] / n]
@@ -858,6 +866,33 @@ fn distribution_warnings(points: &[[f64; 3]]) -> Vec<String> {
         );
     }
     warnings
+}
+
+/// Share of the points at each end of every axis left out of the cloud's bulk.
+const BULK_TRIM: f64 = 0.01;
+
+/// How many points lie far from the cloud's bulk (the box of its points from the 1st to the
+/// 99th percentile along each axis), when they stretch the whole box to more than twice the
+/// bulk's longest side: a vehicle's ends and mirrors never do, one stray return kilometres away
+/// (a bird, a reflection) does, and then normalizing shrinks the vehicle to a speck.
+fn stray_points(points: &[[f64; 3]]) -> Option<usize> {
+    let bulk = |axis: usize| {
+        let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        let last = values.len() - 1;
+        let trim = (BULK_TRIM * last as f64) as usize;
+        let lo = *values.select_nth_unstable_by(trim, f64::total_cmp).1;
+        let hi = *values.select_nth_unstable_by(last - trim, f64::total_cmp).1;
+        (lo, hi)
+    };
+    let bulk = [bulk(0), bulk(1), bulk(2)];
+    let side = bulk.iter().map(|(lo, hi)| hi - lo).fold(0.0, f64::max);
+    let whole = Aabb::of(points)?.longest_side();
+    if whole <= 2.0 * side {
+        return None;
+    }
+    // Far: more than the bulk's own longest side beyond it.
+    let far = |p: &[f64; 3]| (0..3).any(|a| p[a] < bulk[a].0 - side || p[a] > bulk[a].1 + side);
+    Some(points.iter().filter(|p| far(p)).count())
 }
 
 #[cfg(test)]
@@ -1174,6 +1209,17 @@ mod tests {
         assert!(done.warnings[1].contains("thin line"));
         let car = complete(&partial(), None, &options(Method::Identity)).unwrap();
         assert!(car.warnings.is_empty(), "{:?}", car.warnings);
+        // One stray return a kilometre off: named as such, not taken for a thin line.
+        let mut stray = partial();
+        let far = stray.positions[0].map(|v| v + 1000.0);
+        stray.positions.push(far);
+        let done = complete(&stray, None, &options(Method::Identity)).unwrap();
+        assert_eq!(done.warnings.len(), 1, "{:?}", done.warnings);
+        assert!(
+            done.warnings[0].starts_with("1 point(s) lie far from the rest"),
+            "{:?}",
+            done.warnings
+        );
         let inpainter = tiny_inpainter();
         let mut three = options(Method::Network);
         three.views = vec![5, 6, 7];

@@ -269,6 +269,63 @@ fn a_known_width_puts_the_far_flank_that_far_from_the_near_one() {
     }
 }
 
+/// A car leaning 2° across its width (a cambered road) under a plumb-line up axis: `--roll
+/// auto` finds the lean and tilts the plane with it; by default the plane stands upright.
+#[test]
+fn roll_auto_tilts_the_plane_with_a_leaning_car() {
+    let dir = TempDir::new().unwrap();
+    let (s2, c2) = 2.0_f64.to_radians().sin_cos();
+    let car = PointCloud::from_positions(
+        shapes::car(8000, 4)
+            .cloud
+            .positions
+            .iter()
+            .map(|p| {
+                [
+                    p[0] * c2 - p[1] * s2 + 650_000.0,
+                    p[0] * s2 + p[1] * c2,
+                    p[2],
+                ]
+            })
+            .collect(),
+    );
+    let input = write(&dir, "leaning.ply", &car);
+    let report = |roll: Option<&str>| -> serde_json::Value {
+        let output = dir.path().join("done.ply");
+        let mut cmd = mvpcc();
+        cmd.args([
+            "complete",
+            s(&input),
+            s(&output),
+            "--method",
+            "mirror",
+            "--json",
+        ]);
+        if let Some(roll) = roll {
+            cmd.args(["--roll", roll]);
+        }
+        serde_json::from_slice(&cmd.assert().success().get_output().stdout).unwrap()
+    };
+    let upright = report(None);
+    assert_eq!(upright["orientation"]["roll"], 0.0);
+    assert_eq!(upright["symmetry_plane"]["normal"][1], 0.0);
+    let found = report(Some("auto"));
+    let roll = found["orientation"]["roll"].as_f64().unwrap();
+    assert!((roll.abs() - 2.0).abs() <= 0.3, "found {roll}°");
+    // The plane's normal in the input's coordinates leans by as much, whichever way it points.
+    let lean = found["symmetry_plane"]["normal"][1].as_f64().unwrap().abs();
+    assert!((lean - s2).abs() < 0.005, "normal's up component {lean}");
+
+    for (roll, text) in [("50", "not auto or a roll"), ("up", "not auto or a roll")] {
+        refuses(
+            &input,
+            &dir.path().join("x.ply"),
+            &format!("--roll={roll}"),
+            text,
+        );
+    }
+}
+
 #[test]
 fn the_built_in_model_completes_out_of_the_box() {
     let dir = TempDir::new().unwrap();

@@ -6,7 +6,7 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
-use mvpcc::complete::{Method, Options};
+use mvpcc::complete::{Method, Options, Roll};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -298,6 +298,12 @@ pub struct CompleteArgs {
     /// [default: auto; none with --paper]
     #[arg(long, allow_negative_numbers = true)]
     pub orient: Option<OrientMode>,
+    /// How far the vehicle leans across its width (a cambered road, a kerb), degrees about its
+    /// length: auto (found from the cloud's symmetry, within ±4°, where it shows enough) or a
+    /// number, positive when the plane of symmetry's normal tilts up from +x of the vehicle's
+    /// frame. [default: 0, upright as the input's up axis]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "paper")]
+    pub roll: Option<Roll>,
     /// Orientation network weights (train-orient's orienter.safetensors) [default: built in].
     #[arg(long)]
     pub orienter: Option<PathBuf>,

@@ -20,7 +20,7 @@ pub mod thin;
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::{inliers, SorParams};
 use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
-use crate::complete::symmetry::{find_plane, mirror, Plane};
+use crate::complete::symmetry::{find_plane, find_roll, mirror, Plane};
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
@@ -56,6 +56,32 @@ pub enum Method {
     Mirror,
 }
 
+/// The vehicle's lean across its width, about its length axis (see [`find_roll`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Roll {
+    /// Found from the cloud's symmetry.
+    Auto,
+    /// Given, in degrees; 0 takes the vehicle as upright as the input's up axis.
+    Given(f64),
+}
+
+/// Most a given roll may be, degrees: beyond it the input's up axis is wrong, not the road.
+pub const MAX_GIVEN_ROLL: f64 = 45.0;
+
+impl std::str::FromStr for Roll {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match (s, s.parse::<f64>()) {
+            ("auto", _) => Ok(Roll::Auto),
+            (_, Ok(deg)) if deg.abs() <= MAX_GIVEN_ROLL => Ok(Roll::Given(deg)),
+            _ => Err(format!(
+                "`{s}` is not auto or a roll in degrees within ±{MAX_GIVEN_ROLL}"
+            )),
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
     pub method: Method,
@@ -63,6 +89,9 @@ pub struct Options {
     /// Which way the input's front faces (see [`crate::core::frame`]); `None` keeps the input's
     /// axes, turning only its longer horizontal side onto the length.
     pub heading: Option<f64>,
+    /// How far the vehicle leans across its width; upright as read unless asked, since on
+    /// upright vehicles a roll found costs a little (docs/completing.md, *Leaning vehicles*).
+    pub roll: Roll,
     /// Rig cameras the model's views come from.
     pub views: Vec<usize>,
     /// Erosion element side for the inpainted views.
@@ -115,6 +144,7 @@ impl Options {
         Options {
             up,
             heading,
+            roll: Roll::Given(0.0),
             snap: false,
             keep_input: false,
             symmetry: false,
@@ -132,6 +162,7 @@ impl Default for Options {
             method: Method::Network,
             up: UpAxis::Y,
             heading: None,
+            roll: Roll::Given(0.0),
             views: crate::core::camera::DEFAULT_VIEWS.to_vec(),
             erode: 3,
             smooth: 0,
@@ -333,6 +364,8 @@ pub struct Completion {
     /// Re-projected network points removed by the outlier filter.
     pub filtered_out: usize,
     pub plane: Option<Plane>,
+    /// The vehicle's lean across its width that the frame takes out, degrees ([`Options::roll`]).
+    pub roll: f64,
     /// Why the input looks unlike what the model was trained on.
     pub warnings: Vec<String>,
     pub timings: Timings,
@@ -361,6 +394,7 @@ pub fn complete(
     let symmetry_start = Instant::now();
     let Framed {
         frame,
+        roll,
         measured,
         plane,
     } = framed(input, options)?;
@@ -409,6 +443,7 @@ pub fn complete(
         mirrored,
         filtered_out,
         plane,
+        roll,
         warnings,
         timings,
         views,
@@ -456,6 +491,8 @@ fn with_network(
 /// The network's frame for an input, the measured points in it, and the symmetry plane.
 struct Framed {
     frame: Frame,
+    /// The roll the frame takes out, degrees.
+    roll: f64,
     measured: Vec<[f64; 3]>,
     plane: Option<Plane>,
 }
@@ -463,15 +500,27 @@ struct Framed {
 /// Fits the frame (in the heading's pose), finds the symmetry plane when anything needs it, and
 /// refits the frame around the plane when `symmetric_frame` asks.
 fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError> {
-    let fitted = match options.heading {
+    let posed = match options.heading {
         Some(heading) => Frame::fit_heading(input, options.up, heading)?,
         None => Frame::fit(input, options.up)?,
     };
-    let fitted_points: Vec<[f64; 3]> = input
-        .positions
-        .iter()
-        .map(|&p| fitted.to_normalized(p))
-        .collect();
+    let normalized = |frame: &Frame| -> Vec<[f64; 3]> {
+        input
+            .positions
+            .iter()
+            .map(|&p| frame.to_normalized(p))
+            .collect()
+    };
+    let roll = match options.roll {
+        Roll::Given(roll) => roll,
+        Roll::Auto => find_roll(&normalized(&posed)).unwrap_or(0.0),
+    };
+    let fitted = if roll == 0.0 {
+        posed
+    } else {
+        posed.rolled(input, roll)?
+    };
+    let fitted_points = normalized(&fitted);
     let wants_plane = options.symmetric_frame
         || options.method == Method::Mirror
         || (options.method == Method::Network && options.symmetry);
@@ -496,6 +545,7 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
     });
     Ok(Framed {
         frame,
+        roll,
         measured,
         plane,
     })

@@ -11,6 +11,9 @@ use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 
+/// The normal of the planes `x = c`.
+const ACROSS: [f64; 3] = [1.0, 0.0, 0.0];
+
 /// Points used to find the plane; a stride over the cloud keeps the search ~1 ms a candidate.
 const SAMPLE: usize = 4000;
 /// A point within this distance (normalized units) of a candidate plane does not vote for it.
@@ -94,7 +97,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
     let across = bounds.max[0] - bounds.min[0];
     let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across))?;
-    let (best, support) = sample.best_offset([1.0, 0.0]);
+    let (best, support) = sample.best_offset(ACROSS);
     let supported = support >= MIN_SCORE;
     let start = if supported { best } else { bounds.center()[0] };
     let normals = sample.normals();
@@ -342,8 +345,60 @@ const MAX_TURN: f64 = 8.0;
 /// much, which costs more F1@0.01 than any other part of orientation; the symmetry plane of a
 /// vehicle pins its length axis to a fraction of a degree.
 pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
+    let sample = unit_sample(points)?;
+    // The plane along heading h has the horizontal normal (sin h, 0, cos h).
+    let normal = |h: f64| {
+        let (s, c) = h.to_radians().sin_cos();
+        [s, 0.0, c]
+    };
+    best_angle(&sample, normal, heading, MAX_TURN).map(|h| h.rem_euclid(360.0))
+}
+
+/// Most a cloud is found rolled by [`find_roll`], degrees: a road's crossfall is 2–3 % (about
+/// 1.5°), a wheel on a kerb a few degrees more.
+pub const MAX_ROLL: f64 = 4.0;
+/// Support (the share of points mirrored onto others) the upright plane needs before a roll
+/// is looked for: one-sided scans pair too few points to tell a roll from the plane's offset,
+/// and on upright ones the roll found then scatters by degrees (docs/completing.md).
+const MIN_ROLL_SUPPORT: f64 = 0.3;
+
+/// How far a vehicle leans across its width, in degrees about its length: `points` are in the
+/// canonical pose (x across, y up, z along; any unit), and the plane of symmetry that fits them
+/// best has the normal (cos r, sin r, 0) for the r returned, within ±[`MAX_ROLL`]. A scanner's
+/// up axis is the plumb line, while a vehicle on a cambered road or a kerb leans with it, and
+/// its mirror images then land beside their partners: a lean of 1.5° cost the mirror a tenth of
+/// its F1@0.01 on the validation split (docs/completing.md). `None` when the cloud does not
+/// show enough symmetry to tell.
+pub fn find_roll(points: &[[f64; 3]]) -> Option<f64> {
+    let sample = cross_section_sample(points)?;
+    let normal = |r: f64| {
+        let (s, c) = r.to_radians().sin_cos();
+        [c, s, 0.0]
+    };
+    if sample.best_offset(normal(0.0)).1 < MIN_ROLL_SUPPORT {
+        return None;
+    }
+    best_angle(&sample, normal, 0.0, MAX_ROLL)
+}
+
+/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and scaled by its cross-section
+/// (the larger of its width and height): a roll moves points across the width by their height
+/// times its angle, so a bus's is measured against its own size, not its length. Mirroring
+/// across a plane that holds the length axis commutes with any scaling along it.
+fn cross_section_sample(points: &[[f64; 3]]) -> Option<Sample> {
     let bounds = Aabb::of(points)?;
-    let extent = bounds.longest_side();
+    let [w, h, _] = bounds.extent();
+    scaled_sample(points, &bounds, w.max(h))
+}
+
+/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and scaled to unit length.
+fn unit_sample(points: &[[f64; 3]]) -> Option<Sample> {
+    let bounds = Aabb::of(points)?;
+    scaled_sample(points, &bounds, bounds.longest_side())
+}
+
+/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and divided by `extent`.
+fn scaled_sample(points: &[[f64; 3]], bounds: &Aabb, extent: f64) -> Option<Sample> {
     if extent <= 0.0 {
         return None;
     }
@@ -352,40 +407,46 @@ pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
         .iter()
         .map(|p| [0, 1, 2].map(|i| (p[i] - center[i]) / extent))
         .collect();
-    let sample = Sample::of(&unit, REFINE_SAMPLE, MIN_LEVER)?;
-    // The plane along heading h has the horizontal normal (sin h, cos h) in (x, z).
-    let normal = |h: f64| {
-        let (s, c) = h.to_radians().sin_cos();
-        [s, c]
-    };
-    let (c0, support) = sample.best_offset(normal(heading));
+    Sample::of(&unit, REFINE_SAMPLE, MIN_LEVER)
+}
+
+/// The angle (degrees) within `max` of `start` whose plane, `normal(angle)` its unit normal,
+/// the sample's mirror images land closest to, coarse to fine, the plane's offset searched
+/// with it. `None` when the sample shows no symmetry at `start`.
+fn best_angle(
+    sample: &Sample,
+    normal: impl Fn(f64) -> [f64; 3],
+    start: f64,
+    max: f64,
+) -> Option<f64> {
+    let (c0, support) = sample.best_offset(normal(start));
     if support < MIN_SCORE {
         return None;
     }
     // Turning about the box centre moves the plane's offset by the lever of the vehicle's
     // middle, a few hundredths at most.
     let search = |best: (f64, f64, f64), turns: &[f64], offsets: &[f64]| {
-        let (h, c) = (best.0, best.1);
+        let (a, c) = (best.0, best.1);
         let mut best = best;
         for &t in turns {
-            let n = normal(h + t);
+            let n = normal(a + t);
             for &o in offsets {
                 let score = sample.closeness(n, c + o);
                 if score > best.2 {
-                    best = (h + t, c + o, score);
+                    best = (a + t, c + o, score);
                 }
             }
         }
         best
     };
-    let start = (heading, c0, sample.closeness(normal(heading), c0));
-    let coarse: Vec<f64> = (-8..=8).map(|i| i as f64 * MAX_TURN / 8.0).collect();
+    let start = (start, c0, sample.closeness(normal(start), c0));
+    let coarse: Vec<f64> = (-8..=8).map(|i| i as f64 * max / 8.0).collect();
     let best = search(start, &coarse, &[-0.02, -0.01, 0.0, 0.01, 0.02]);
     let fine: Vec<f64> = (-5..=5).map(|i| i as f64 * 0.2).collect();
     let best = search(best, &fine, &[-0.005, -0.0025, 0.0, 0.0025, 0.005]);
     let finest: Vec<f64> = (-4..=4).map(|i| i as f64 * 0.05).collect();
     let best = search(best, &finest, &[-0.001, 0.0, 0.001]);
-    Some(best.0.rem_euclid(360.0))
+    Some(best.0)
 }
 
 /// A strided sample of a cloud with the distance within which a mirror image counts as landing
@@ -510,21 +571,21 @@ impl Sample {
     fn plane(&self, c: f64, fit: PlaneFit) -> Plane {
         Plane {
             offset: c,
-            support: self.support([1.0, 0.0], c),
+            support: self.support(ACROSS, c),
             tolerance: self.tolerance,
             fit,
         }
     }
 
-    /// Fraction of the sample whose mirror image across the vertical plane `p·n = c` lands on
-    /// a sampled point; `n` is the plane's unit normal in (x, z).
-    fn support(&self, n: [f64; 2], c: f64) -> f64 {
+    /// Fraction of the sample whose mirror image across the plane `p·n = c` lands on a sampled
+    /// point; `n` is the plane's unit normal.
+    fn support(&self, n: [f64; 3], c: f64) -> f64 {
         self.mirrored_sum(n, c, |_| 1.0)
     }
 
     /// [`Sample::support`] with each landing weighted by how close it is, `1 − (d / tolerance)²`:
     /// smooth in the plane's angle, where the count changes in steps.
-    fn closeness(&self, n: [f64; 2], c: f64) -> f64 {
+    fn closeness(&self, n: [f64; 3], c: f64) -> f64 {
         let t2 = self.tolerance * self.tolerance;
         self.mirrored_sum(n, c, |d2| 1.0 - d2 / t2)
     }
@@ -532,18 +593,18 @@ impl Sample {
     /// Σ `weight(d²)` over the sample's mirror images that land within the tolerance of a
     /// sampled point (d: the distance to the nearest), over the sample size. Points closer to
     /// the plane than the lever map onto themselves and do not count.
-    fn mirrored_sum(&self, n: [f64; 2], c: f64, weight: impl Fn(f64) -> f64 + Sync) -> f64 {
+    fn mirrored_sum(&self, n: [f64; 3], c: f64, weight: impl Fn(f64) -> f64 + Sync) -> f64 {
         let sum: f64 = self
             .points
             .par_iter()
             .with_min_len(1024)
             .filter_map(|p| {
-                let d = p[0] * n[0] + p[2] * n[1] - c;
+                let d = dot(*p, n) - c;
                 if d.abs() <= self.lever {
                     return None;
                 }
                 self.grid
-                    .nearest_within([p[0] - 2.0 * d * n[0], p[1], p[2] - 2.0 * d * n[1]])
+                    .nearest_within([0, 1, 2].map(|k| p[k] - 2.0 * d * n[k]))
                     .map(&weight)
             })
             .sum();
@@ -552,12 +613,12 @@ impl Sample {
 
     /// The best offset of a plane with normal `n` across the sample, coarse to fine, and its
     /// support.
-    fn best_offset(&self, n: [f64; 2]) -> (f64, f64) {
+    fn best_offset(&self, n: [f64; 3]) -> (f64, f64) {
         let (lo, hi) = self
             .points
             .iter()
             .fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-                let s = p[0] * n[0] + p[2] * n[1];
+                let s = dot(*p, n);
                 (lo.min(s), hi.max(s))
             });
         let best_of = |candidates: Vec<f64>| {
@@ -576,6 +637,10 @@ impl Sample {
                 .collect(),
         )
     }
+}
+
+fn dot(p: [f64; 3], n: [f64; 3]) -> f64 {
+    p[0] * n[0] + p[1] * n[1] + p[2] * n[2]
 }
 
 /// `p` mirrored across `x = offset`.
@@ -609,6 +674,41 @@ mod tests {
                 plane.offset
             );
         }
+    }
+
+    #[test]
+    fn a_leaning_car_s_roll_is_found_and_one_side_is_left_upright() {
+        let sampled = crate::datagen::shapes::car(20_000, 1);
+        let lean = |points: &[[f64; 3]], deg: f64| -> Vec<[f64; 3]> {
+            let (s, c) = f64::to_radians(deg).sin_cos();
+            points
+                .iter()
+                .map(|p| [p[0] * c - p[1] * s, p[0] * s + p[1] * c, p[2]])
+                .collect()
+        };
+        for deg in [0.0, 1.5, -3.0] {
+            let found = find_roll(&lean(&sampled.cloud.positions, deg)).expect("a whole car");
+            assert!(
+                (found - deg).abs() <= 0.25,
+                "leaning {deg}°, found {found}°"
+            );
+        }
+        // One flank and the whole roof, as a scanner above the roof sees them: the roof's halves
+        // pair across the plane.
+        let side = scanned_side(&sampled).positions;
+        let found = find_roll(&lean(&side, 2.0)).expect("the roof is symmetric");
+        assert!(
+            (found - 2.0).abs() <= 0.25,
+            "one side leaning 2°, found {found}°"
+        );
+        // The near flank below the windows alone pairs too few points to tell a lean from the
+        // plane's offset.
+        let top = side.iter().map(|p| p[1]).fold(f64::MIN, f64::max);
+        let flank: Vec<[f64; 3]> = side
+            .into_iter()
+            .filter(|p| p[0] > 0.0 && p[1] < 0.6 * top)
+            .collect();
+        assert_eq!(find_roll(&lean(&flank, 2.0)), None);
     }
 
     #[test]

@@ -122,8 +122,12 @@ impl Frame {
     /// Fits the frame to a cloud whose up axis is `up` and whose front faces `heading`
     /// degrees: the cloud is turned into the canonical pose, then boxed.
     pub fn fit_heading(cloud: &PointCloud, up: UpAxis, heading: f64) -> Result<Frame, FrameError> {
+        Frame::fit_rotation(cloud, mat_mul(&yaw_to_canonical(heading), &upright(up)))
+    }
+
+    /// The cloud turned by `rotation`, then boxed.
+    fn fit_rotation(cloud: &PointCloud, rotation: [[f64; 3]; 3]) -> Result<Frame, FrameError> {
         let bounds = cloud.bounds().ok_or(FrameError::Empty)?;
-        let rotation = mat_mul(&yaw_to_canonical(heading), &upright(up));
         // Turned about the axis-aligned centre, so georeferenced offsets cost no precision.
         let origin = bounds.center();
         checked(bounds.longest_side(), origin)?;
@@ -143,6 +147,15 @@ impl Frame {
             extent,
             rotation,
         })
+    }
+
+    /// This frame turned about its length axis (z) by `-roll` degrees and fitted to `cloud`
+    /// again: a vehicle whose plane of symmetry has the normal (cos r, sin r, 0) in this frame
+    /// stands upright in the new one (see [`crate::complete::symmetry::find_roll`]).
+    pub fn rolled(&self, cloud: &PointCloud, roll: f64) -> Result<Frame, FrameError> {
+        let (s, c) = roll.to_radians().sin_cos();
+        let unroll = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+        Frame::fit_rotation(cloud, mat_mul(&unroll, &self.rotation))
     }
 
     /// Refuses a frame read from a file that cannot map points back: a non-finite centre, an
@@ -226,6 +239,32 @@ mod tests {
             }
         }
         PointCloud::from_positions(positions)
+    }
+
+    #[test]
+    fn a_rolled_frame_stands_the_leaning_plane_upright() {
+        let cloud = georeferenced_box();
+        let frame = Frame::fit_heading(&cloud, UpAxis::Z, 0.0).unwrap();
+        let roll = 2.5_f64;
+        let rolled = frame.rolled(&cloud, roll).unwrap();
+        assert!(rolled.check().is_ok());
+        // The plane's normal (cos r, sin r, 0) in the upright frame is +x in the rolled one.
+        let (s, c) = roll.to_radians().sin_cos();
+        let origin = frame.to_input([0.0; 3]);
+        let tip = frame.to_input([c, s, 0.0]);
+        let [a, b] = [origin, tip].map(|p| rolled.to_normalized(p));
+        let n = [0, 1, 2].map(|i| (b[i] - a[i]) * rolled.extent / frame.extent);
+        assert!(
+            (n[0] - 1.0).abs() < 1e-9 && n[1].abs() < 1e-9 && n[2].abs() < 1e-9,
+            "{n:?}"
+        );
+        // Refitted: the box still holds every point within the unit cube's half-side.
+        let reach = cloud
+            .positions
+            .iter()
+            .flat_map(|&p| rolled.to_normalized(p))
+            .fold(0.0_f64, |m, v| m.max(v.abs()));
+        assert!((reach - 0.5).abs() < 1e-9, "{reach}");
     }
 
     #[test]

@@ -136,6 +136,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         method: args.method,
         up,
         heading: None,
+        roll: args.roll.unwrap_or(Options::default().roll),
         views: args.views.0.clone(),
         erode: args.erode,
         smooth: args.smooth,
@@ -216,6 +217,8 @@ struct OrientationReport {
     method: &'static str,
     refinement: Option<f64>,
     refined_by: Option<&'static str>,
+    /// The lean across the width the frame took out, degrees (`--roll`).
+    roll: f64,
 }
 
 /// Completes one file; the report of what happened.
@@ -340,6 +343,7 @@ fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timing
             method: run.orientation.method,
             refinement: run.orientation.refinement,
             refined_by: run.orientation.refined_by,
+            roll: done.roll,
         },
         cleaned: run.cleaned.map(|(_, report)| report),
         warnings: done.warnings,

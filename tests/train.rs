@@ -395,6 +395,11 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
     let resumed: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&settings).unwrap()).unwrap();
     assert_eq!(resumed["loss"]["depth"], 0.0);
+    // Which training samples are scored beside the validation changes nothing the run computes.
+    train(&run, 3, &["--seen-samples", "1"])
+        .arg("--resume")
+        .assert()
+        .success();
     // Rendering views larger than the data's leaves holes: said, not refused.
     base(&dir.path().join("larger"))
         .args([
@@ -509,6 +514,8 @@ fn kill_when(run: &Path, resume: bool, ready: impl Fn(&Path) -> bool) {
     cmd.args(["--config", "tiny", "--batch", "1", "--val-every", "2"])
         .args([
             "--val-samples",
+            "2",
+            "--seen-samples",
             "2",
             "--log-every",
             "1",

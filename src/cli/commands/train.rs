@@ -18,8 +18,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Settings a resumed run may change: they decide how the run is carried out and reported, not
-/// what it computes.
-const OPERATIONAL: [&str; 2] = ["log_every", "keep"];
+/// what it computes (the training samples scored beside the validation decide nothing).
+const OPERATIONAL: [&str; 3] = ["log_every", "keep", "seen_samples"];
 
 /// `--config`: a preset's name (`cpu`, the CPU default; `paper`, `small`, `tiny`) or a JSON
 /// file holding a model config.

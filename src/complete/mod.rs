@@ -926,6 +926,7 @@ const BULK_TRIM: f64 = 0.01;
 /// bulk's longest side: a vehicle's ends and mirrors never do, one stray return kilometres away
 /// (a bird, a reflection) does, and then normalizing shrinks the vehicle to a speck.
 fn stray_points(points: &[[f64; 3]]) -> Option<usize> {
+    let whole = Aabb::of(points)?.longest_side();
     let bulk = |axis: usize| {
         let mut values: Vec<f64> = points.iter().map(|p| p[axis]).collect();
         let last = values.len() - 1;
@@ -936,7 +937,6 @@ fn stray_points(points: &[[f64; 3]]) -> Option<usize> {
     };
     let bulk = [bulk(0), bulk(1), bulk(2)];
     let side = bulk.iter().map(|(lo, hi)| hi - lo).fold(0.0, f64::max);
-    let whole = Aabb::of(points)?.longest_side();
     if whole <= 2.0 * side {
         return None;
     }

@@ -351,7 +351,7 @@ pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
         let (s, c) = h.to_radians().sin_cos();
         [s, 0.0, c]
     };
-    best_angle(&sample, normal, heading, MAX_TURN).map(|h| h.rem_euclid(360.0))
+    best_angle(&sample, normal, heading, MAX_TURN, MIN_SCORE).map(|h| h.rem_euclid(360.0))
 }
 
 /// Most a cloud is found rolled by [`find_roll`], degrees: a road's crossfall is 2–3 % (about
@@ -375,10 +375,7 @@ pub fn find_roll(points: &[[f64; 3]]) -> Option<f64> {
         let (s, c) = r.to_radians().sin_cos();
         [c, s, 0.0]
     };
-    if sample.best_offset(normal(0.0)).1 < MIN_ROLL_SUPPORT {
-        return None;
-    }
-    best_angle(&sample, normal, 0.0, MAX_ROLL)
+    best_angle(&sample, normal, 0.0, MAX_ROLL, MIN_ROLL_SUPPORT)
 }
 
 /// [`REFINE_SAMPLE`] points of the cloud, centred on its box and scaled by its cross-section
@@ -412,15 +409,16 @@ fn scaled_sample(points: &[[f64; 3]], bounds: &Aabb, extent: f64) -> Option<Samp
 
 /// The angle (degrees) within `max` of `start` whose plane, `normal(angle)` its unit normal,
 /// the sample's mirror images land closest to, coarse to fine, the plane's offset searched
-/// with it. `None` when the sample shows no symmetry at `start`.
+/// with it. `None` when the plane at `start` mirrors under `min_support` of the sample onto it.
 fn best_angle(
     sample: &Sample,
     normal: impl Fn(f64) -> [f64; 3],
     start: f64,
     max: f64,
+    min_support: f64,
 ) -> Option<f64> {
     let (c0, support) = sample.best_offset(normal(start));
-    if support < MIN_SCORE {
+    if support < min_support {
         return None;
     }
     // Turning about the box centre moves the plane's offset by the lever of the vehicle's

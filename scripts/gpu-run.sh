@@ -92,7 +92,16 @@ rate_args=(--lr "$lr")
 out=$1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
-work=$(mktemp -d /tmp/mvpcc-gpu-run.XXXXXX)
+work=$(mktemp -d "${TMPDIR:-/tmp}/mvpcc-gpu-run.XXXXXX")
+# The unpacked binary, the data and the run are 100+ MB a leg: left behind, the smoke test's
+# copies filled a shared disk. Whatever comes back is in OUT by then; a data job still running
+# when a step fails is stopped first, so that it writes nothing after the removal.
+cleanup() {
+    kill $(jobs -p) 2>/dev/null
+    wait 2>/dev/null
+    rm -rf "$work"
+}
+trap cleanup EXIT
 start=$(date +%s)
 deadline=$((start + minutes * 60))
 log=$out/run.log

@@ -9,8 +9,10 @@ use std::process::Command;
 fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
+    let scratch = scratch_dir(dir.path());
     let output = Command::new("bash")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("TMPDIR", &scratch)
         .arg("scripts/gpu-run.sh")
         .args([
             "--tiny",
@@ -29,6 +31,7 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
         .unwrap();
     let log = std::fs::read_to_string(out.join("run.log")).unwrap_or_default();
     assert!(output.status.success(), "{log}");
+    assert_empty(&scratch);
 
     let profiles = std::fs::read_to_string(out.join("profiles.txt")).unwrap();
     for line in [
@@ -143,8 +146,10 @@ fn a_binary_without_the_legs_options_is_refused_before_the_data() {
     let executable = std::os::unix::fs::PermissionsExt::from_mode(0o755);
     std::fs::set_permissions(&old, executable).unwrap();
     let out = dir.path().join("out");
+    let scratch = scratch_dir(dir.path());
     let output = Command::new("bash")
         .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("TMPDIR", &scratch)
         .arg("scripts/gpu-run.sh")
         .args(["--widen", "48", "--bin"])
         .arg(&old)
@@ -160,6 +165,23 @@ fn a_binary_without_the_legs_options_is_refused_before_the_data() {
     assert!(!std::fs::read_to_string(out.join("run.log"))
         .unwrap()
         .contains("prepare"));
+    assert_empty(&scratch);
+}
+
+/// Where the script makes its working directory (TMPDIR), so a test can see it removed.
+fn scratch_dir(parent: &Path) -> std::path::PathBuf {
+    let scratch = parent.join("scratch");
+    std::fs::create_dir(&scratch).unwrap();
+    scratch
+}
+
+/// The script's working directory (binary, data, run: 100+ MB) is gone once it ends.
+fn assert_empty(scratch: &Path) {
+    let left: Vec<_> = std::fs::read_dir(scratch)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
 }
 
 fn has_png(dir: &Path) -> bool {

@@ -354,94 +354,162 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
         .iter()
         .map(|&p| path.coordinates(p))
         .collect();
-    let (mut u0, mut u1, mut t0, mut t1) = (
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-    );
-    for &(u, t) in &coords {
-        u0 = u0.min(u);
-        u1 = u1.max(u);
-        t0 = t0.min(t);
-        t1 = t1.max(t);
-    }
-    let step = angle_step_deg.to_radians();
-    let lines = (((u1 - u0) / line_spacing).ceil() as usize).max(1);
-    let angles = (((t1 - t0) / step).ceil() as usize).max(1);
-    let mut hit_t = vec![f32::INFINITY; lines * angles];
-    let mut hit_tri = vec![u32::MAX; lines * angles];
-    let mut hit_bary = vec![[0f32; 2]; lines * angles];
-    let up = [0.0, 1.0, 0.0];
-    // One ray direction per elevation step, shared by every line and triangle.
-    let dirs: Vec<[f32; 3]> = (0..angles)
-        .map(|i| {
-            let (sin, cos) = (t0 + (i as f32 + 0.5) * step).sin_cos();
-            [0, 1, 2].map(|k| cos * path.out[k] + sin * up[k])
-        })
-        .collect();
-    for (ti, tri) in mesh.triangles.iter().enumerate() {
-        let [c0, c1, c2] = tri.map(|i| coords[i as usize]);
-        let (lu, hu) = (c0.0.min(c1.0).min(c2.0), c0.0.max(c1.0).max(c2.0));
-        let (lt, ht) = (c0.1.min(c1.1).min(c2.1), c0.1.max(c1.1).max(c2.1));
-        let j0 = ((lu - u0) / line_spacing - 0.5).ceil().max(0.0) as usize;
-        let j1 = (((hu - u0) / line_spacing - 0.5).floor() as isize).min(lines as isize - 1);
-        let i0 = ((lt - t0) / step - 0.5).ceil().max(0.0) as usize;
-        let i1 = (((ht - t0) / step - 0.5).floor() as isize).min(angles as isize - 1);
-        if j1 < j0 as isize || i1 < i0 as isize {
-            continue;
-        }
-        let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
-        let e1 = [0, 1, 2].map(|k| p1[k] - p0[k]);
-        let e2 = [0, 1, 2].map(|k| p2[k] - p0[k]);
-        for j in j0..=j1 as usize {
-            let u = u0 + (j as f32 + 0.5) * line_spacing;
-            let o = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k]);
-            let s = [0, 1, 2].map(|k| o[k] - p0[k]);
-            for (i, &dir) in dirs.iter().enumerate().take(i1 as usize + 1).skip(i0) {
-                // Möller–Trumbore.
-                let pv = cross(dir, e2);
-                let det = dot(e1, pv);
-                if det.abs() < 1e-12 {
-                    continue;
-                }
-                let inv = 1.0 / det;
-                let b1 = dot(s, pv) * inv;
-                if !(0.0..=1.0).contains(&b1) {
-                    continue;
-                }
-                let qv = cross(s, e1);
-                let b2 = dot(dir, qv) * inv;
-                if b2 < 0.0 || b1 + b2 > 1.0 {
-                    continue;
-                }
-                let t = dot(e2, qv) * inv;
-                let at = j * angles + i;
-                if t > 0.0 && t < hit_t[at] {
-                    hit_t[at] = t;
-                    hit_tri[at] = ti as u32;
-                    hit_bary[at] = [b1, b2];
-                }
-            }
-        }
-    }
+    let rays = RayGrid::spanning(&coords, &path, line_spacing, angle_step_deg.to_radians());
+    let hits = rays.first_hits(mesh, &coords, &path);
     let mut out = Surface::default();
-    for j in 0..lines {
-        let u = u0 + (j as f32 + 0.5) * line_spacing;
-        for (i, dir) in dirs.iter().enumerate() {
-            let at = j * angles + i;
-            if hit_tri[at] == u32::MAX {
+    for j in 0..rays.lines {
+        for (i, dir) in rays.dirs.iter().enumerate() {
+            let Some(hit) = hits[j * rays.angles + i] else {
                 continue;
-            }
-            let range = hit_t[at] + noise * rng.gauss() as f32;
-            let p = [0, 1, 2].map(|k| path.origin[k] + u * path.along[k] + range * dir[k]);
-            let [b1, b2] = hit_bary[at];
+            };
+            let range = hit.t + noise * rng.gauss() as f32;
+            let origin = rays.origin(&path, j);
+            let p = [0, 1, 2].map(|k| origin[k] + range * dir[k]);
+            let [b1, b2] = hit.bary;
             out.points.push(path.to_path_frame(p));
             out.colors
-                .push(mesh.color_at(hit_tri[at] as usize, [1.0 - b1 - b2, b1, b2]));
+                .push(mesh.color_at(hit.triangle, [1.0 - b1 - b2, b1, b2]));
         }
     }
     out
+}
+
+/// The scanner's rays over the mesh's extent: `lines` scan lines along the path (`u`), each
+/// with one ray per elevation step (`t`), centred in their cells.
+struct RayGrid {
+    u0: f32,
+    t0: f32,
+    line_spacing: f32,
+    step: f32,
+    lines: usize,
+    angles: usize,
+    /// One ray direction per elevation step, shared by every line and triangle.
+    dirs: Vec<[f32; 3]>,
+}
+
+/// A ray's nearest hit: its distance along the ray, the triangle and the barycentric
+/// coordinates of the second and third corners.
+#[derive(Clone, Copy)]
+struct Hit {
+    t: f32,
+    triangle: usize,
+    bary: [f32; 2],
+}
+
+impl RayGrid {
+    fn spanning(coords: &[(f32, f32)], path: &ScanPath, line_spacing: f32, step: f32) -> Self {
+        let (mut u0, mut u1, mut t0, mut t1) = (
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        );
+        for &(u, t) in coords {
+            u0 = u0.min(u);
+            u1 = u1.max(u);
+            t0 = t0.min(t);
+            t1 = t1.max(t);
+        }
+        let lines = (((u1 - u0) / line_spacing).ceil() as usize).max(1);
+        let angles = (((t1 - t0) / step).ceil() as usize).max(1);
+        let up = [0.0, 1.0, 0.0];
+        let dirs = (0..angles)
+            .map(|i| {
+                let (sin, cos) = (t0 + (i as f32 + 0.5) * step).sin_cos();
+                [0, 1, 2].map(|k| cos * path.out[k] + sin * up[k])
+            })
+            .collect();
+        RayGrid {
+            u0,
+            t0,
+            line_spacing,
+            step,
+            lines,
+            angles,
+            dirs,
+        }
+    }
+
+    /// Where scan line `j` leaves the path.
+    fn origin(&self, path: &ScanPath, j: usize) -> [f32; 3] {
+        let u = self.u0 + (j as f32 + 0.5) * self.line_spacing;
+        [0, 1, 2].map(|k| path.origin[k] + u * path.along[k])
+    }
+
+    /// The nearest hit of every ray (line-major), none where a ray hits nothing. Each triangle
+    /// is tried only against the rays whose centres lie within its extent in (u, t).
+    fn first_hits(&self, mesh: &Mesh, coords: &[(f32, f32)], path: &ScanPath) -> Vec<Option<Hit>> {
+        let mut hits: Vec<Option<Hit>> = vec![None; self.lines * self.angles];
+        for (ti, tri) in mesh.triangles.iter().enumerate() {
+            let [c0, c1, c2] = tri.map(|i| coords[i as usize]);
+            let span = |lo: f32, hi: f32, origin: f32, cell: f32, count: usize| {
+                let first = ((lo - origin) / cell - 0.5).ceil().max(0.0) as usize;
+                let last = (((hi - origin) / cell - 0.5).floor() as isize).min(count as isize - 1);
+                (last >= first as isize).then_some(first..=last as usize)
+            };
+            let lines = span(
+                c0.0.min(c1.0).min(c2.0),
+                c0.0.max(c1.0).max(c2.0),
+                self.u0,
+                self.line_spacing,
+                self.lines,
+            );
+            let angles = span(
+                c0.1.min(c1.1).min(c2.1),
+                c0.1.max(c1.1).max(c2.1),
+                self.t0,
+                self.step,
+                self.angles,
+            );
+            let (Some(lines), Some(angles)) = (lines, angles) else {
+                continue;
+            };
+            let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
+            let e1 = [0, 1, 2].map(|k| p1[k] - p0[k]);
+            let e2 = [0, 1, 2].map(|k| p2[k] - p0[k]);
+            for j in lines {
+                let o = self.origin(path, j);
+                let s = [0, 1, 2].map(|k| o[k] - p0[k]);
+                for i in angles.clone() {
+                    let Some((t, bary)) = ray_triangle(self.dirs[i], s, e1, e2) else {
+                        continue;
+                    };
+                    let best = &mut hits[j * self.angles + i];
+                    if best.map_or(t < f32::INFINITY, |b| t < b.t) {
+                        *best = Some(Hit {
+                            t,
+                            triangle: ti,
+                            bary,
+                        });
+                    }
+                }
+            }
+        }
+        hits
+    }
+}
+
+/// Möller–Trumbore: the distance along `dir` at which a ray from a triangle's first corner
+/// offset by `s` (origin − corner) meets the triangle with edges `e1`, `e2`, and the hit's
+/// barycentric coordinates; none behind the origin, outside the triangle or parallel to it.
+fn ray_triangle(dir: [f32; 3], s: [f32; 3], e1: [f32; 3], e2: [f32; 3]) -> Option<(f32, [f32; 2])> {
+    let pv = cross(dir, e2);
+    let det = dot(e1, pv);
+    if det.abs() < 1e-12 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let b1 = dot(s, pv) * inv;
+    if !(0.0..=1.0).contains(&b1) {
+        return None;
+    }
+    let qv = cross(s, e1);
+    let b2 = dot(dir, qv) * inv;
+    if b2 < 0.0 || b1 + b2 > 1.0 {
+        return None;
+    }
+    let t = dot(e2, qv) * inv;
+    (t > 0.0).then_some((t, [b1, b2]))
 }
 
 #[cfg(test)]

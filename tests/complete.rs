@@ -156,6 +156,45 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
     }
 }
 
+/// `--mirror-pass` completes the mirror image too, and says so in the report; the mirror
+/// method runs no network.
+#[test]
+fn the_mirror_pass_is_reported() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let input = write(&dir, "scan.ply", &scan(3));
+    let passes = |extra: &[&str]| {
+        let output = dir.path().join("done.ply");
+        let assert = mvpcc()
+            .args([
+                "complete",
+                s(&input),
+                s(&output),
+                "--model",
+                s(&model),
+                "--json",
+            ])
+            .args(extra)
+            .assert()
+            .success();
+        let report: serde_json::Value =
+            serde_json::from_slice(&assert.get_output().stdout).unwrap();
+        assert!(
+            report["warnings"].as_array().unwrap().is_empty(),
+            "{report}"
+        );
+        report["network_passes"].as_u64().unwrap()
+    };
+    assert_eq!(passes(&[]), 1);
+    assert_eq!(passes(&["--mirror-pass"]), 2);
+    assert_eq!(passes(&["--mirror-pass", "--method", "mirror"]), 0);
+    mvpcc()
+        .args(["complete", "--paper", "--mirror-pass", "a.ply", "b.ply"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("cannot be used with"));
+}
+
 #[test]
 fn timings_table_and_las_synthetic_flag() {
     let dir = TempDir::new().unwrap();

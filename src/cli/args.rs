@@ -315,7 +315,7 @@ pub struct CompleteArgs {
     /// model's views, inpainting, 3×3 erosion, re-projection, outlier filter (k 20, σ 5), back
     /// to the input's frame. No cleaning, no orientation unless --orient names one, no
     /// symmetric frame, no mirror images, no snapping, the measured points not kept.
-    #[arg(long, conflicts_with_all = ["clean", "keep_input", "symmetry", "no_snap", "method"])]
+    #[arg(long, conflicts_with_all = ["clean", "keep_input", "symmetry", "no_snap", "method", "mirror_pass"])]
     pub paper: bool,
     /// Write the network's input and inpainted views in the dataset's format (`DIR/input/`,
     /// `DIR/output/`; with --input-dir, `DIR/<relative path without extension>/…`), for
@@ -336,6 +336,11 @@ pub struct CompleteArgs {
     /// Let the network alone complete the far side.
     #[arg(long, overrides_with = "symmetry")]
     pub no_symmetry: bool,
+    /// The network also completes the measured points' mirror image, and what it makes of it,
+    /// mirrored back, joins its output: a fuller far side from the network, at twice the
+    /// network's time.
+    #[arg(long)]
+    pub mirror_pass: bool,
     /// The vehicle's width in the input's units, when known (buses and lorries: 2.55 m in the
     /// EU): on a scan of one side the symmetry plane is kept at least half of it from the
     /// scanned flank, so the mirrored far flank is not drawn inside the vehicle.

@@ -142,6 +142,34 @@ impl PointCloud {
         }
     }
 
+    /// Adds `other`'s points after this cloud's. Colours and attributes stay where both clouds
+    /// have them (attributes matched by name); an empty cloud takes `other`'s as they are.
+    pub fn append(&mut self, other: PointCloud) {
+        if self.is_empty() {
+            *self = other;
+            return;
+        }
+        self.positions.extend(other.positions);
+        self.colors = match (self.colors.take(), other.colors) {
+            (Some(mut colors), Some(more)) => {
+                colors.extend(more);
+                Some(colors)
+            }
+            _ => None,
+        };
+        let mut more = other.attributes;
+        self.attributes.retain_mut(|a| {
+            let Some(at) = more
+                .iter()
+                .position(|b| b.name == a.name && b.kind == a.kind)
+            else {
+                return false;
+            };
+            a.values.extend(more.swap_remove(at).values);
+            true
+        });
+    }
+
     /// The points for which `keep` is true.
     pub fn filter(&self, keep: &[bool]) -> PointCloud {
         let indices: Vec<usize> = (0..self.len()).filter(|&i| keep[i]).collect();
@@ -179,6 +207,44 @@ impl PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Colours and attributes follow the points where both clouds have them; an empty cloud
+    /// becomes the other.
+    #[test]
+    fn appending_keeps_what_both_clouds_carry() {
+        let intensity = |values: Vec<f64>| Attribute {
+            name: "intensity".into(),
+            kind: ScalarKind::U16,
+            values,
+        };
+        let mut cloud = PointCloud {
+            positions: vec![[0.0; 3]],
+            colors: Some(vec![[1, 2, 3]]),
+            attributes: vec![intensity(vec![7.0])],
+            quantization: None,
+        };
+        let other = PointCloud {
+            positions: vec![[1.0; 3], [2.0; 3]],
+            colors: Some(vec![[4, 5, 6], [7, 8, 9]]),
+            attributes: vec![intensity(vec![8.0, 9.0])],
+            quantization: None,
+        };
+        cloud.append(other.clone());
+        assert_eq!(cloud.positions, [[0.0; 3], [1.0; 3], [2.0; 3]]);
+        assert_eq!(
+            cloud.colors.as_deref(),
+            Some(&[[1, 2, 3], [4, 5, 6], [7, 8, 9]][..])
+        );
+        assert_eq!(cloud.attributes, [intensity(vec![7.0, 8.0, 9.0])]);
+
+        cloud.append(PointCloud::from_positions(vec![[3.0; 3]]));
+        assert_eq!(cloud.len(), 4);
+        assert!(cloud.colors.is_none() && cloud.attributes.is_empty());
+
+        let mut empty = PointCloud::default();
+        empty.append(other.clone());
+        assert_eq!(empty, other);
+    }
 
     fn sample() -> PointCloud {
         PointCloud {

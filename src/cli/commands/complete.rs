@@ -149,6 +149,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         box_margin: args.box_margin,
         thin: args.thin,
         symmetry: !args.no_symmetry,
+        mirror_pass: args.mirror_pass,
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),
         vehicle_width: args.vehicle_width,
@@ -176,6 +177,8 @@ struct FileReport {
     added: usize,
     mirrored: usize,
     filtered_out: usize,
+    /// Objects the network completed: 2 with `--mirror-pass` (and a plane), 0 without it.
+    network_passes: usize,
     symmetry_plane: Option<PlaneReport>,
     orientation: OrientationReport,
     cleaned: Option<CleanReport>,
@@ -337,6 +340,7 @@ fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timing
         added: done.added,
         mirrored: done.mirrored,
         filtered_out: done.filtered_out,
+        network_passes: done.network_passes,
         symmetry_plane: done.plane.map(|p| PlaneReport::of(&p, &done.frame)),
         orientation: OrientationReport {
             heading: run.orientation.heading,

@@ -1,5 +1,5 @@
 //! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient and
-//! complete with the built-in models, write; and the parts users can switch off. A dense scan of
+//! complete with the built-in models, write; and the parts users can switch on or off. A dense scan of
 //! one side (half a million points, as a survey-grade scanner gives a bus) is timed with the
 //! mirror alone: the network's time does not depend on the points, the geometric stages do. With
 //! `MVPCC_BENCH_MODEL=FILE` (a generator's weights, such as a relay leg's) the network method is
@@ -44,13 +44,26 @@ fn end_to_end(c: &mut Criterion) {
         group
             .sample_size(10)
             .measurement_time(Duration::from_secs(10));
+        let network = |mirror_pass| Options {
+            mirror_pass,
+            ..Options::default()
+        };
+        let mirror = Options {
+            method: Method::Mirror,
+            ..Options::default()
+        };
+        let builtin = &completers[0].1;
         let runs = completers
             .iter()
-            .map(|(model, c)| (Method::Network, model.as_str(), c));
-        for (method, model, completer) in runs.chain([(Method::Mirror, "", &completers[0].1)]) {
-            let label = format!("{method:?}{model}: read, orient, complete, write");
+            .map(|(model, c)| (model.clone(), c, network(false)))
+            .chain([
+                (", --mirror-pass".to_string(), builtin, network(true)),
+                (String::new(), builtin, mirror),
+            ]);
+        for (label, completer, options) in runs {
+            let label = format!("{:?}{label}: read, orient, complete, write", options.method);
             group.bench_function(label, |b| {
-                b.iter(|| complete_file(&input, &output, completer, method))
+                b.iter(|| complete_file(&input, &output, completer, &options))
             });
         }
         group.finish();
@@ -71,22 +84,23 @@ fn dense_side(c: &mut Criterion, completer: &Completer) {
     group
         .sample_size(10)
         .measurement_time(Duration::from_secs(10));
+    let mirror = Options {
+        method: Method::Mirror,
+        ..Options::default()
+    };
     group.bench_function("Mirror: read, orient, complete, write", |b| {
-        b.iter(|| complete_file(&input, &output, completer, Method::Mirror))
+        b.iter(|| complete_file(&input, &output, completer, &mirror))
     });
     group.finish();
 }
 
-/// What `mvpcc complete IN OUT --method M` does.
-fn complete_file(input: &Path, output: &Path, completer: &Completer, method: Method) {
+/// What `mvpcc complete IN OUT` does with `options`.
+fn complete_file(input: &Path, output: &Path, completer: &Completer, options: &Options) {
     let cloud = read_cloud(input, None).unwrap().cloud;
     let settings = Settings {
         clean: false,
         orient: OrientMode::Auto,
-        options: Options {
-            method,
-            ..Options::default()
-        },
+        options: options.clone(),
     };
     let run = completer.run(&cloud, &settings).unwrap();
     write_cloud(output, &run.completion.cloud, None, Encoding::Binary).unwrap();

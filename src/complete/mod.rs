@@ -127,7 +127,8 @@ pub struct Options {
     /// does).
     pub symmetry: bool,
     /// Also let the network complete the measured points' mirror image and keep what it makes
-    /// of it, mirrored back, beside its first output (needs a plane; see [`run_network`]).
+    /// of it, mirrored back, beside its first output (needs a plane; docs/completing.md, *The
+    /// mirrored pass*).
     pub mirror_pass: bool,
     /// Fit the network's box to the measured points and their mirror images, centred on the
     /// symmetry plane as the training objects are; otherwise the measured points' own box.

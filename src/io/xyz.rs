@@ -21,21 +21,8 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         if line.is_empty() {
             continue;
         }
-        values.clear();
-        let mut bad = None;
-        for tok in line
-            .split(|c: char| c == ',' || c.is_whitespace())
-            .filter(|t| !t.is_empty())
-        {
-            match tok.parse::<f64>() {
-                Ok(v) => values.push(v),
-                Err(_) => {
-                    bad = Some(tok);
-                    break;
-                }
-            }
-        }
-        if let Some(tok) = bad {
+        let at = |problem: String| Problem::Malformed(format!("line {}: {problem}", line_no + 1));
+        if let Err(tok) = parse_values(line, &mut values) {
             // A column-name line before the first point is a header, not an error.
             if columns.is_none()
                 && positions.is_empty()
@@ -43,10 +30,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
             {
                 continue;
             }
-            return Err(Problem::Malformed(format!(
-                "line {}: {tok:?} is not a number",
-                line_no + 1
-            )));
+            return Err(at(format!("{tok:?} is not a number")));
         }
         if positions.len() >= limit {
             return Err(Problem::TooManyPoints {
@@ -56,18 +40,12 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         }
         let n = values.len();
         if n != 3 && n < 6 {
-            return Err(Problem::Malformed(format!(
-                "line {}: {n} values, expected x y z or x y z r g b",
-                line_no + 1
-            )));
+            return Err(at(format!("{n} values, expected x y z or x y z r g b")));
         }
         match columns {
             None => columns = Some(n),
             Some(c) if c != n => {
-                return Err(Problem::Malformed(format!(
-                    "line {}: {n} values where earlier lines have {c}",
-                    line_no + 1
-                )))
+                return Err(at(format!("{n} values where earlier lines have {c}")))
             }
             Some(_) => {}
         }
@@ -76,21 +54,35 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
             colors.push([values[3], values[4], values[5]]);
         }
     }
-    // Colours are 0–255, unless every value lies in [0, 1] and one is fractional.
+    Ok(PointCloud {
+        positions,
+        colors: (!colors.is_empty()).then(|| to_bytes(&colors)),
+        ..Default::default()
+    })
+}
+
+/// The numbers of one line, separated by whitespace or commas, into `values`; the first token
+/// that is not a number is the error.
+fn parse_values<'a>(line: &'a str, values: &mut Vec<f64>) -> Result<(), &'a str> {
+    values.clear();
+    for tok in line
+        .split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|t| !t.is_empty())
+    {
+        values.push(tok.parse::<f64>().map_err(|_| tok)?);
+    }
+    Ok(())
+}
+
+/// Colours are 0–255, unless every value lies in [0, 1] and one is fractional.
+fn to_bytes(colors: &[[f64; 3]]) -> Vec<[u8; 3]> {
     let unit = colors.iter().flatten().all(|v| (0.0..=1.0).contains(v))
         && colors.iter().flatten().any(|v| v.fract() != 0.0);
     let scale = if unit { 255.0 } else { 1.0 };
-    let colors = (!colors.is_empty()).then(|| {
-        colors
-            .iter()
-            .map(|c| c.map(|v| (v * scale).round().clamp(0.0, 255.0) as u8))
-            .collect()
-    });
-    Ok(PointCloud {
-        positions,
-        colors,
-        ..Default::default()
-    })
+    colors
+        .iter()
+        .map(|c| c.map(|v| (v * scale).round().clamp(0.0, 255.0) as u8))
+        .collect()
 }
 
 pub(super) fn write(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
@@ -123,12 +115,17 @@ mod tests {
     }
 
     #[test]
-    fn bad_tokens_and_ragged_lines_are_errors() {
-        assert!(read_str("1 2 3\n4 five 6\n")
-            .unwrap_err()
-            .to_string()
-            .contains("line 2"));
-        assert!(read_str("1 2 3\n4 5 6 7 8 9\n").is_err());
-        assert!(read_str("1 2\n").is_err());
+    fn bad_tokens_and_ragged_lines_are_errors_naming_the_line() {
+        for (text, problem) in [
+            ("1 2 3\n4 five 6\n", "line 2: \"five\" is not a number"),
+            (
+                "1 2 3\n4 5 6 7 8 9\n",
+                "line 2: 6 values where earlier lines have 3",
+            ),
+            ("1 2\n", "line 1: 2 values, expected x y z or x y z r g b"),
+        ] {
+            let error = read_str(text).unwrap_err().to_string();
+            assert!(error.contains(problem), "{error}");
+        }
     }
 }

@@ -441,26 +441,17 @@ impl RayGrid {
     fn first_hits(&self, mesh: &Mesh, coords: &[(f32, f32)], path: &ScanPath) -> Vec<Option<Hit>> {
         let mut hits: Vec<Option<Hit>> = vec![None; self.lines * self.angles];
         for (ti, tri) in mesh.triangles.iter().enumerate() {
-            let [c0, c1, c2] = tri.map(|i| coords[i as usize]);
-            let span = |lo: f32, hi: f32, origin: f32, cell: f32, count: usize| {
+            let corners = tri.map(|i| coords[i as usize]);
+            // The rays of one axis whose centres lie within the corners' values on it.
+            let span = |values: [f32; 3], origin: f32, cell: f32, count: usize| {
+                let lo = values[0].min(values[1]).min(values[2]);
+                let hi = values[0].max(values[1]).max(values[2]);
                 let first = ((lo - origin) / cell - 0.5).ceil().max(0.0) as usize;
                 let last = (((hi - origin) / cell - 0.5).floor() as isize).min(count as isize - 1);
                 (last >= first as isize).then_some(first..=last as usize)
             };
-            let lines = span(
-                c0.0.min(c1.0).min(c2.0),
-                c0.0.max(c1.0).max(c2.0),
-                self.u0,
-                self.line_spacing,
-                self.lines,
-            );
-            let angles = span(
-                c0.1.min(c1.1).min(c2.1),
-                c0.1.max(c1.1).max(c2.1),
-                self.t0,
-                self.step,
-                self.angles,
-            );
+            let lines = span(corners.map(|c| c.0), self.u0, self.line_spacing, self.lines);
+            let angles = span(corners.map(|c| c.1), self.t0, self.step, self.angles);
             let (Some(lines), Some(angles)) = (lines, angles) else {
                 continue;
             };

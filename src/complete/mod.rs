@@ -33,6 +33,7 @@ use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::borrow::Cow;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -641,16 +642,16 @@ fn run_network(
 
 /// One object the network completes: the measured points, or their mirror image about the
 /// plane at `x = mirrored`.
-struct Pass {
-    measured: Vec<[f64; 3]>,
+struct Pass<'a> {
+    measured: Cow<'a, [[f64; 3]]>,
     mirrored: Option<f64>,
 }
 
-impl Pass {
+impl<'a> Pass<'a> {
     /// The measured points, and their mirror image where a plane is given.
-    fn all(measured: &[[f64; 3]], plane: Option<Plane>) -> Vec<Pass> {
+    fn all(measured: &'a [[f64; 3]], plane: Option<Plane>) -> Vec<Pass<'a>> {
         let first = Pass {
-            measured: measured.to_vec(),
+            measured: Cow::Borrowed(measured),
             mirrored: None,
         };
         let second = plane.map(|plane| Pass {

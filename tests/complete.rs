@@ -183,6 +183,7 @@ fn the_mirror_pass_is_reported() {
             report["warnings"].as_array().unwrap().is_empty(),
             "{report}"
         );
+        assert!(report["seconds"]["mirror pass"].as_f64().unwrap() >= 0.0);
         report["network_passes"].as_u64().unwrap()
     };
     assert_eq!(passes(&[]), 1);

@@ -55,9 +55,9 @@ fn end_to_end(c: &mut Criterion) {
         let builtin = &completers[0].1;
         let runs = completers
             .iter()
-            .map(|(model, c)| (model.clone(), c, network(false)))
+            .map(|(model, c)| (model.clone(), c, network(true)))
             .chain([
-                (", --mirror-pass".to_string(), builtin, network(true)),
+                (", --no-mirror-pass".to_string(), builtin, network(false)),
                 (String::new(), builtin, mirror),
             ]);
         for (label, completer, options) in runs {

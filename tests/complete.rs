@@ -156,8 +156,8 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
     }
 }
 
-/// `--mirror-pass` completes the mirror image too, and says so in the report; the mirror
-/// method runs no network.
+/// The network completes the mirror image too unless `--no-mirror-pass`, and says so in the
+/// report; the mirror method runs no network.
 #[test]
 fn the_mirror_pass_is_reported() {
     let dir = TempDir::new().unwrap();
@@ -186,9 +186,10 @@ fn the_mirror_pass_is_reported() {
         assert!(report["seconds"]["mirror pass"].as_f64().unwrap() >= 0.0);
         report["network_passes"].as_u64().unwrap()
     };
-    assert_eq!(passes(&[]), 1);
-    assert_eq!(passes(&["--mirror-pass"]), 2);
-    assert_eq!(passes(&["--mirror-pass", "--method", "mirror"]), 0);
+    assert_eq!(passes(&[]), 2);
+    assert_eq!(passes(&["--no-mirror-pass"]), 1);
+    assert_eq!(passes(&["--no-mirror-pass", "--mirror-pass"]), 2);
+    assert_eq!(passes(&["--method", "mirror"]), 0);
     mvpcc()
         .args(["complete", "--paper", "--mirror-pass", "a.ply", "b.ply"])
         .assert()

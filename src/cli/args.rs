@@ -337,10 +337,12 @@ pub struct CompleteArgs {
     #[arg(long, overrides_with = "symmetry")]
     pub no_symmetry: bool,
     /// The network also completes the measured points' mirror image, and what it makes of it,
-    /// mirrored back, joins its output: a fuller far side from the network, at twice the
-    /// network's time.
-    #[arg(long)]
+    /// mirrored back, joins its output (the default; the two passes run side by side).
+    #[arg(long, overrides_with = "no_mirror_pass")]
     pub mirror_pass: bool,
+    /// One network pass, on the measured points alone: half the network's work, for one core.
+    #[arg(long, overrides_with = "mirror_pass")]
+    pub no_mirror_pass: bool,
     /// The vehicle's width in the input's units, when known (buses and lorries: 2.55 m in the
     /// EU): on a scan of one side the symmetry plane is kept at least half of it from the
     /// scanned flank, so the mirrored far flank is not drawn inside the vehicle.

@@ -181,7 +181,7 @@ impl Default for Options {
             box_margin: 0.025,
             thin: 0.03125,
             symmetry: true,
-            mirror_pass: false,
+            mirror_pass: true,
             symmetric_frame: true,
             keep_views: false,
             vehicle_width: None,
@@ -439,7 +439,7 @@ pub fn complete(
         network_passes = network.passes;
         if options.mirror_pass && network_passes < 2 {
             warnings.push(
-                "no symmetry plane was found, so the network ran once (--mirror-pass needs one)"
+                "no symmetry plane found, so the network ran once, without the mirrored pass"
                     .into(),
             );
         }

@@ -149,7 +149,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         box_margin: args.box_margin,
         thin: args.thin,
         symmetry: !args.no_symmetry,
-        mirror_pass: args.mirror_pass,
+        mirror_pass: !args.no_mirror_pass,
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),
         vehicle_width: args.vehicle_width,
@@ -177,7 +177,8 @@ struct FileReport {
     added: usize,
     mirrored: usize,
     filtered_out: usize,
-    /// Objects the network completed: 2 with `--mirror-pass` (and a plane), 0 without it.
+    /// Objects the network completed: 2 with the mirrored pass (and a plane), 1 with
+    /// `--no-mirror-pass`, 0 without the network.
     network_passes: usize,
     symmetry_plane: Option<PlaneReport>,
     orientation: OrientationReport,

@@ -166,14 +166,8 @@ fn the_mirror_pass_is_reported() {
     let passes = |extra: &[&str]| {
         let output = dir.path().join("done.ply");
         let assert = mvpcc()
-            .args([
-                "complete",
-                s(&input),
-                s(&output),
-                "--model",
-                s(&model),
-                "--json",
-            ])
+            .args(["complete", s(&input), s(&output)])
+            .args(["--model", s(&model), "--json"])
             .args(extra)
             .assert()
             .success();

@@ -631,9 +631,10 @@ fn run_network(
     }
     let cameras = Camera::set(&options.views, config.size)?;
     let colors = input.colors.as_deref();
-    let mut passes = Pass::all(measured, plane.filter(|_| options.mirror_pass)).into_iter();
-    let first = passes.next().expect("the measured points' own pass");
-    let second = passes.next();
+    let first = Pass::of(measured);
+    let second = plane
+        .filter(|_| options.mirror_pass)
+        .map(|plane| Pass::mirrored(measured, plane));
     let cameras = &cameras;
     let (output, second) = std::thread::scope(|scope| {
         let second = second.map(|pass| {
@@ -650,7 +651,10 @@ fn run_network(
         });
         let output = first.run(colors, cameras, plane, inpainter, options, timings);
         let waiting = Instant::now();
-        let second = second.map(|h| h.join().expect("the mirrored pass does not panic"));
+        let second = second.map(|h| {
+            h.join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+        });
         timings.mirror_pass = waiting.elapsed();
         (output, second)
     });
@@ -675,17 +679,20 @@ struct Pass<'a> {
 }
 
 impl<'a> Pass<'a> {
-    /// The measured points, and their mirror image where a plane is given.
-    fn all(measured: &'a [[f64; 3]], plane: Option<Plane>) -> Vec<Pass<'a>> {
-        let first = Pass {
+    /// The measured points as they are.
+    fn of(measured: &'a [[f64; 3]]) -> Self {
+        Pass {
             measured: Cow::Borrowed(measured),
             mirrored: None,
-        };
-        let second = plane.map(|plane| Pass {
+        }
+    }
+
+    /// The measured points' mirror image about `plane`.
+    fn mirrored(measured: &[[f64; 3]], plane: Plane) -> Self {
+        Pass {
             measured: measured.iter().map(|&p| mirror(p, plane.offset)).collect(),
             mirrored: Some(plane.offset),
-        });
-        std::iter::once(first).chain(second).collect()
+        }
     }
 
     /// The network's points for this pass's object, in the measured points' own frame; the

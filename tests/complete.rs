@@ -460,6 +460,11 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         ..Default::default()
     };
     write_cloud(&inputs.join("few.ply"), &few, None, Encoding::Binary).unwrap();
+    // A stray return and a NaN point: each said once, after the progress bar, and in the JSON.
+    let mut odd = PointCloud::from_positions(scan(9).positions);
+    odd.positions
+        .extend([[500.0, 0.0, 0.0], [f64::NAN, 0.0, 0.0]]);
+    write_cloud(&inputs.join("odd.ply"), &odd, None, Encoding::Binary).unwrap();
     // A link back to the top of the tree: followed once, its files not taken twice.
     #[cfg(unix)]
     std::os::unix::fs::symlink(&inputs, inputs.join("street/loop")).unwrap();
@@ -468,16 +473,35 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .args(["--model", s(&model), "--jobs", "2", "--json"])
         .assert()
         .failure()
-        .stderr(predicate::str::contains("2 of 4 files failed"))
+        .stderr(predicate::str::contains("2 of 5 files failed"))
         .stderr(predicate::str::contains("broken.ply"))
         .stderr(predicate::str::contains("few.ply").and(predicate::str::contains("20 points")))
         .stderr(predicate::str::contains("panicked").not());
     let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
-    assert_eq!(report["results"].as_array().unwrap().len(), 4);
+    assert_eq!(report["results"].as_array().unwrap().len(), 5);
     assert_eq!(
         (&report["completed"], &report["failed"]),
-        (&2.into(), &2.into())
+        (&3.into(), &2.into())
     );
+    let odd = report["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["input"].as_str().unwrap().ends_with("odd.ply"))
+        .unwrap();
+    let warnings: Vec<&str> = odd["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(warnings.contains(&"dropped 1 point with NaN or infinite coordinates"));
+    assert!(warnings.iter().any(|w| w.starts_with("1 point(s) lie far")));
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr);
+    for warning in warnings {
+        let line = format!("warning: {}: {warning}\n", odd["input"].as_str().unwrap());
+        assert_eq!(stderr.matches(&line).count(), 1, "{line}: {stderr}");
+    }
     let failed: Vec<&str> = report["results"]
         .as_array()
         .unwrap()
@@ -509,7 +533,7 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .unwrap()
         .map(|e| e.unwrap().file_name())
         .collect();
-    assert_eq!(leftovers.len(), 2, "no temp files left: {leftovers:?}");
+    assert_eq!(leftovers.len(), 3, "no temp files left: {leftovers:?}");
 }
 
 /// `complete` over a folder with `--json`: the inputs of the files it completed and skipped.

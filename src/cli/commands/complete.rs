@@ -1,5 +1,5 @@
 use super::project::default_up;
-use super::{load, progress, Log};
+use super::{non_finite_warning, progress, Log};
 use crate::cli::args::CompleteArgs;
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
@@ -14,7 +14,9 @@ use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
 use mvpcc::io::stdio::is_stdio;
-use mvpcc::io::{atomic_write, check_output, read_bytes, same_file, write_cloud, Format};
+use mvpcc::io::{
+    atomic_write, check_output, read_bytes, read_cloud, same_file, write_cloud, Format,
+};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
 use mvpcc::model::weights::generator_in;
@@ -237,11 +239,19 @@ fn complete_file(
     check_paths(input, output, views.as_deref(), args)?;
     let format = output_format(args, input, output)?;
     let start = Instant::now();
-    let cloud = load(input, args.input_options.format, log)?;
+    let loaded = read_cloud(input, args.input_options.format)?;
+    let cloud = loaded.cloud;
     let read = start.elapsed();
-    let run = completer
+    let mut run = completer
         .run(&cloud, &settings(args, input))
         .map_err(|e| anyhow!("{}: {e}", input.display()))?;
+    let saved = match &views {
+        Some(dir) => save_views(dir, &run.completion)?,
+        None => None,
+    };
+    let warnings = &mut run.completion.warnings;
+    warnings.splice(0..0, non_finite_warning(loaded.non_finite_dropped));
+    warnings.extend(saved);
     if let Some((_, report)) = &run.cleaned {
         log.info(format!(
             "{}: --clean removed {} ground, {} isolated and {} other-object points",
@@ -270,9 +280,6 @@ fn complete_file(
     if let Some(path) = &args.preview {
         let measured = run.cleaned.as_ref().map_or(&cloud, |(c, _)| c);
         write_preview(path, measured, done)?;
-    }
-    if let Some(dir) = &views {
-        save_views(dir, input, done, log)?;
     }
     log.info(summary(output, &run, &timings));
     if args.timings && !args.json {
@@ -360,14 +367,12 @@ fn report(input: &Path, output: &Path, args: &CompleteArgs, run: Run, t: &Timing
     }
 }
 
-/// The network's views as `DIR/input/` and `DIR/output/`; said so when the method ran none.
-fn save_views(dir: &Path, input: &Path, done: &Completion, log: Log) -> anyhow::Result<()> {
+/// The network's views as `DIR/input/` and `DIR/output/`; a warning when the method ran none.
+fn save_views(dir: &Path, done: &Completion) -> anyhow::Result<Option<String>> {
     let Some(views) = &done.views else {
-        log.warn(format!(
-            "{}: --save-views: the method ran no network, so there are no views to save",
-            input.display()
+        return Ok(Some(
+            "--save-views: the method ran no network, so there are no views to save".into(),
         ));
-        return Ok(());
     };
     for (name, images) in [("input", &views.input), ("output", &views.output)] {
         let dir = dir.join(name);
@@ -375,7 +380,7 @@ fn save_views(dir: &Path, input: &Path, done: &Completion, log: Log) -> anyhow::
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         write_views(&dir, images)?;
     }
-    Ok(())
+    Ok(None)
 }
 
 fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::Result<()> {
@@ -544,7 +549,7 @@ fn batch_entry(
         return BatchEntry::Skipped { input, output };
     }
     // Each file's own messages would tear the progress bar; the batch summarizes them.
-    let quiet = Log { quiet: true };
+    let quiet = Log::silent();
     let result = output
         .parent()
         .map_or(Ok(()), std::fs::create_dir_all)

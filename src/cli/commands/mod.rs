@@ -20,7 +20,10 @@ use std::fmt::Display;
 use std::path::Path;
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    let log = Log { quiet: cli.quiet };
+    let log = Log {
+        quiet: cli.quiet,
+        silent: false,
+    };
     match cli.command {
         Command::Complete(args) => complete::run(args, log),
         Command::Eval(args) => eval::run(args, log),
@@ -39,9 +42,18 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 #[derive(Debug, Clone, Copy)]
 pub struct Log {
     quiet: bool,
+    /// Not even warnings: for work whose caller reports them itself.
+    silent: bool,
 }
 
 impl Log {
+    pub fn silent() -> Log {
+        Log {
+            quiet: true,
+            silent: true,
+        }
+    }
+
     pub fn info(&self, message: impl Display) {
         if !self.quiet {
             eprintln!("{message}");
@@ -49,7 +61,9 @@ impl Log {
     }
 
     pub fn warn(&self, message: impl Display) {
-        eprintln!("warning: {message}");
+        if !self.silent {
+            eprintln!("warning: {message}");
+        }
     }
 
     pub fn quiet(&self) -> bool {
@@ -69,15 +83,16 @@ pub(crate) fn open_device(choice: DeviceChoice, log: Log) -> anyhow::Result<Open
 /// Reads a cloud, warning about points dropped for NaN or infinite coordinates.
 pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Result<PointCloud> {
     let loaded = read_cloud(path, format)?;
-    let dropped = loaded.non_finite_dropped;
-    if dropped > 0 {
-        let points = if dropped == 1 { "point" } else { "points" };
-        log.warn(format!(
-            "{}: dropped {dropped} {points} with NaN or infinite coordinates",
-            path.display()
-        ));
+    if let Some(warning) = non_finite_warning(loaded.non_finite_dropped) {
+        log.warn(format!("{}: {warning}", path.display()));
     }
     Ok(loaded.cloud)
+}
+
+/// What reading dropped, when it dropped points with NaN or infinite coordinates.
+pub(crate) fn non_finite_warning(dropped: usize) -> Option<String> {
+    let points = if dropped == 1 { "point" } else { "points" };
+    (dropped > 0).then(|| format!("dropped {dropped} {points} with NaN or infinite coordinates"))
 }
 
 /// A training loop's progress bar over `steps` (0 until the loop knows them) on stderr, with

@@ -13,14 +13,14 @@ use mvpcc::views::projection::project;
 use mvpcc::views::write_views;
 
 fn stages(c: &mut Criterion) {
-    let mut mesh = synthesize(0, 1, &[Category::Car]).mesh;
+    let mut mesh = synthesize(0, 1, &[Category::Car.into()]).mesh;
     mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
         .unwrap();
     let tris = mesh.triangles.len();
     let mut g = c.benchmark_group("prepare");
     g.sample_size(10);
     g.bench_function(format!("synthesize a car ({tris} triangles)"), |b| {
-        b.iter(|| synthesize(0, 1, &[Category::Car]))
+        b.iter(|| synthesize(0, 1, &[Category::Car.into()]))
     });
     g.bench_function("ground truth: 20 cameras at 512², voxel 1/256", |b| {
         b.iter(|| ground_truth(&mesh, 512, 1.0 / 256.0))
@@ -59,7 +59,7 @@ fn stages(c: &mut Criterion) {
         b.iter(|| write_views(dir.path(), &dense).unwrap())
     });
     let obj = dir.path().join("car.obj");
-    write_obj(&obj, &synthesize(0, 1, &[Category::Car]).mesh).unwrap();
+    write_obj(&obj, &synthesize(0, 1, &[Category::Car.into()]).mesh).unwrap();
     let source = Source {
         path: obj,
         category: "car".into(),

@@ -34,7 +34,7 @@ fn car_in_pose() -> (Vec<[f64; 3]>, String) {
 /// A generated bus scanned from a path on its +x side, the sensor below its roof (one flank
 /// and the ends, as in the validation split's drive-bys), and the bus's width.
 fn bus_driven_past() -> (Vec<[f64; 3]>, f64) {
-    let mut mesh = synthesize(0, 3, &[Category::Bus]).mesh;
+    let mut mesh = synthesize(0, 3, &[Category::Bus.into()]).mesh;
     mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
         .unwrap();
     let (lo, hi) = mesh.bounds();

@@ -14,6 +14,8 @@
 #   --profile-seconds S  the profiles' share of it, in seconds from the start [150]
 #   --objects N       procedural vehicles to train on (prepare --synth) [6000]
 #   --seed N          their seed; each leg should draw new ones [the date, YYYYMMDD]
+#   --category LIST   what they are drawn from, NAME or NAME=WEIGHT each (prepare --category;
+#                     e.g. car,bus,truck,train,motorcycle=3 for more motorcycles) [prepare's]
 #   --init PATH|none  weights the leg starts from (train --init) [assets]
 #   --config NAME     model of a fresh run (--init none): a preset or a config file [cpu]
 #   --size S          view side of the data and the model [128]
@@ -56,6 +58,7 @@ losses=l1
 loss_depth=100
 tiny=false
 copy_args=()
+category_args=()
 widen_args=()
 warmup=0
 while [ $# -gt 1 ]; do
@@ -65,6 +68,7 @@ while [ $# -gt 1 ]; do
     --profile-seconds) profile_seconds=$2 ;;
     --objects) objects=$2 ;;
     --seed) seed=$2 ;;
+    --category) category_args=(--category "$2") ;;
     --init) init=$2 ;;
     --config) config=$2 ;;
     --size) size=$2 ;;
@@ -187,6 +191,10 @@ for option in "${init_args[@]}" "${loss_args[@]}" "${rate_args[@]}"; do
         { say "$bin: its train has no $option; rebuild it (scripts/build-cuda.sh)"; exit 1; } ;;
     esac
 done
+if [ ${#category_args[@]} -gt 0 ] && ! "$mvpcc" prepare --help 2>&1 | grep -q NAME=WEIGHT; then
+    say "$bin: its prepare takes no category weights; rebuild it (scripts/build-cuda.sh)"
+    exit 1
+fi
 if command -v nvidia-smi >/dev/null; then
     nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader | tee -a "$profiles" >>"$log"
 fi
@@ -207,8 +215,8 @@ fi
 # The data is made on the CPU cores while the GPU is profiled; niced, so the profiles' host
 # threads keep their cores (PyTorch and mvpcc are profiled under the same load).
 data=$work/data
-say "\$ prepare --synth $objects --seed $seed --size $size (in the background)"
-nice -n 15 "$mvpcc" --quiet prepare --synth "$objects" --seed "$seed" --split "$split" \
+say "\$ prepare --synth $objects --seed $seed ${category_args[*]} --size $size (in the background)"
+nice -n 15 "$mvpcc" --quiet prepare --synth "$objects" --seed "$seed" "${category_args[@]}" --split "$split" \
     --size "$size" --gt-size "$gt_size" --samples 4 --out "$data" >>"$log" 2>&1 &
 prepare=$!
 

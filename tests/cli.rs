@@ -760,6 +760,58 @@ fn synth_is_deterministic_and_writes_a_preview() {
     );
 }
 
+/// `--category NAME=WEIGHT` draws a category more often; the manifest records the weights, so
+/// a rerun with others makes the objects again instead of taking the old ones for done.
+#[test]
+fn synth_draws_categories_by_the_weights_given() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("m");
+    let synth = |category: &str| {
+        mvpcc()
+            .args([
+                "synth",
+                "--count",
+                "40",
+                "--seed",
+                "2",
+                "--category",
+                category,
+            ])
+            .arg("--out")
+            .arg(&out)
+            .assert()
+            .success();
+        let manifest = read_json(&out.join("synth.json"));
+        let motorcycles = manifest["objects"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|o| o["category"] == "motorcycle")
+            .count();
+        (manifest["weights"].clone(), motorcycles)
+    };
+    let (weights, few) = synth("car,motorcycle");
+    assert_eq!(weights, serde_json::json!([4.0, 1.0]));
+    let (weights, many) = synth("car,motorcycle=12");
+    assert_eq!(weights, serde_json::json!([4.0, 12.0]));
+    // Expected 8 of 40 and 30 of 40 (seed 2 draws 3 and 22).
+    assert!(few < 12 && many > 18, "{few} then {many} motorcycles");
+    for (category, says) in [
+        ("car,boat", "unknown category 'boat'"),
+        ("car=0", "car's weight must be a positive number, got '0'"),
+        ("car,car=2", "--category: car given twice"),
+    ] {
+        let other = dir.path().join("other");
+        mvpcc()
+            .args(["synth", "--count", "2", "--category", category, "--out"])
+            .arg(&other)
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(says));
+        assert!(!other.exists());
+    }
+}
+
 #[test]
 fn prepare_shards_share_one_folder_and_a_last_run_writes_the_manifest() {
     let dir = TempDir::new().unwrap();

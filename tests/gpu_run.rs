@@ -23,6 +23,8 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
             "--warmup-steps",
             "3",
             "--input-copy",
+            "--category",
+            "car,motorcycle=3",
             "--bin",
         ])
         .arg(assert_cmd::cargo::cargo_bin("mvpcc"))
@@ -32,6 +34,7 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
     let log = std::fs::read_to_string(out.join("run.log")).unwrap_or_default();
     assert!(output.status.success(), "{log}");
     assert_empty(&scratch);
+    assert!(log.contains("--category car,motorcycle=3"), "{log}");
 
     let profiles = std::fs::read_to_string(out.join("profiles.txt")).unwrap();
     for line in [

@@ -12,7 +12,7 @@ use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
 use mvpcc::datagen::mesh::SignedAxis;
 use mvpcc::datagen::scan::{PartialKinds, PartialParams};
-use mvpcc::datagen::synth::Category;
+use mvpcc::datagen::synth::Draw;
 use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
@@ -641,14 +641,15 @@ pub struct SynthArgs {
 /// What `synth` draws from, shared with `prepare --synth`.
 #[derive(Debug, Args)]
 pub struct SynthOptions {
-    /// Categories to draw from (with --synth; cars weighted 4:1 against each other category).
+    /// Categories to draw from (with --synth): car, bus, truck, train, motorcycle, each as NAME
+    /// or NAME=WEIGHT, how often it is drawn relative to the others (by default car 4, the
+    /// others 1: cars are most of what a mapping car drives past), e.g. car,motorcycle=2.
     #[arg(
         long,
-        value_enum,
         value_delimiter = ',',
         default_value = "car,bus,truck,train,motorcycle"
     )]
-    pub category: Vec<Category>,
+    pub category: Vec<Draw>,
     /// Seed of everything random: objects, samples, noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

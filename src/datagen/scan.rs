@@ -537,7 +537,7 @@ mod tests {
     }
 
     fn normalized_car(seed: u64) -> Mesh {
-        let mut m = synthesize(0, seed, &[Category::Car]).mesh;
+        let mut m = synthesize(0, seed, &[Category::Car.into()]).mesh;
         m.normalize(
             crate::datagen::mesh::SignedAxis::PLUS_Y,
             crate::datagen::mesh::SignedAxis::MINUS_Z,

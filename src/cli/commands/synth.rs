@@ -2,7 +2,7 @@ use super::Log;
 use crate::cli::args::SynthArgs;
 use anyhow::{bail, Context};
 use mvpcc::datagen::mesh::{write_obj, Mesh};
-use mvpcc::datagen::synth::{contact_sheet, synthesize, Category, MAX_OBJECTS};
+use mvpcc::datagen::synth::{contact_sheet, synthesize, Category, Draw, MAX_OBJECTS};
 use mvpcc::io::atomic_write;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -17,12 +17,28 @@ pub(super) struct SynthManifest {
     pub mvpcc_version: String,
     pub seed: u64,
     pub categories: Vec<Category>,
+    /// How often each of `categories` was drawn, relative to the others; absent from manifests
+    /// written before weights could be given, whose categories had their default weights.
+    #[serde(default)]
+    pub weights: Vec<f64>,
     pub objects: Vec<SynthEntry>,
+}
+
+impl SynthManifest {
+    fn draws(&self) -> Vec<Draw> {
+        if self.weights.len() != self.categories.len() {
+            return self.categories.iter().map(|&c| c.into()).collect();
+        }
+        let pairs = self.categories.iter().zip(&self.weights);
+        pairs
+            .map(|(&category, &weight)| Draw { category, weight })
+            .collect()
+    }
 }
 
 #[derive(Debug, Serialize, Deserialize, PartialEq)]
 pub(super) struct SynthEntry {
-    /// Generation index: with the run's seed and categories it gives the object back.
+    /// Generation index: with the run's seed and draws it gives the object back.
     pub index: usize,
     pub name: String,
     pub category: Category,
@@ -58,14 +74,15 @@ pub(super) fn check_count(count: usize, option: &str) -> anyhow::Result<()> {
 pub(super) fn generate(
     out: &Path,
     count: usize,
-    categories: &[Category],
+    draws: &[Draw],
     seed: u64,
     preview: bool,
     log: Log,
 ) -> anyhow::Result<SynthManifest> {
     super::check_out_dir(out)?;
+    check_draws(draws)?;
     let manifest_path = out.join(SYNTH_FILE);
-    if let Some(done) = already_generated(&manifest_path, count, categories, seed) {
+    if let Some(done) = already_generated(&manifest_path, count, draws, seed) {
         log.info(format!(
             "{}: {count} objects already generated",
             out.display()
@@ -81,7 +98,7 @@ pub(super) fn generate(
     let objects = (0..count)
         .into_par_iter()
         .map(|i| {
-            let entry = write_object(out, i, seed, categories)?;
+            let entry = write_object(out, i, seed, draws)?;
             bar.inc(1);
             Ok(entry)
         })
@@ -90,7 +107,8 @@ pub(super) fn generate(
     let manifest = SynthManifest {
         mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
         seed,
-        categories: categories.to_vec(),
+        categories: draws.iter().map(|d| d.category).collect(),
+        weights: draws.iter().map(|d| d.weight).collect(),
         objects,
     };
     atomic_write(&manifest_path, |w| {
@@ -108,28 +126,32 @@ pub(super) fn generate(
     Ok(manifest)
 }
 
-/// The manifest at `path` when it records exactly this run: `count` objects of `categories`
-/// drawn with `seed`.
+/// Refuses a category given twice: which of its weights was meant is not known.
+fn check_draws(draws: &[Draw]) -> anyhow::Result<()> {
+    for (i, d) in draws.iter().enumerate() {
+        if draws[..i].iter().any(|e| e.category == d.category) {
+            bail!("--category: {} given twice", d.category.name());
+        }
+    }
+    Ok(())
+}
+
+/// The manifest at `path` when it records exactly this run: `count` objects from `draws`
+/// with `seed`.
 fn already_generated(
     path: &Path,
     count: usize,
-    categories: &[Category],
+    draws: &[Draw],
     seed: u64,
 ) -> Option<SynthManifest> {
     let text = std::fs::read_to_string(path).ok()?;
     let done = serde_json::from_str::<SynthManifest>(&text).ok()?;
-    (done.seed == seed && done.categories == categories && done.objects.len() == count)
-        .then_some(done)
+    (done.seed == seed && done.draws() == draws && done.objects.len() == count).then_some(done)
 }
 
 /// Synthesizes object `index` of the run and writes it to OUT/CATEGORY/NAME.obj.
-fn write_object(
-    out: &Path,
-    index: usize,
-    seed: u64,
-    categories: &[Category],
-) -> anyhow::Result<SynthEntry> {
-    let s = synthesize(index, seed, categories);
+fn write_object(out: &Path, index: usize, seed: u64, draws: &[Draw]) -> anyhow::Result<SynthEntry> {
+    let s = synthesize(index, seed, draws);
     let dir = out.join(s.category.name());
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let path = dir.join(format!("{}.obj", s.name));
@@ -150,7 +172,7 @@ fn write_preview(out: &Path, manifest: &SynthManifest, log: Log) -> anyhow::Resu
         .objects
         .iter()
         .take(PREVIEW_OBJECTS)
-        .map(|o| synthesize(o.index, manifest.seed, &manifest.categories).mesh)
+        .map(|o| synthesize(o.index, manifest.seed, &manifest.draws()).mesh)
         .collect();
     let refs: Vec<&Mesh> = meshes.iter().collect();
     let sheet = contact_sheet(&refs, 192, 4);

@@ -512,7 +512,7 @@ pub(crate) mod tests {
         side: f32,
         height: f32,
     ) -> Vec<[f64; 3]> {
-        let mut mesh = synthesize(0, seed, &[category]).mesh;
+        let mut mesh = synthesize(0, seed, &[category.into()]).mesh;
         mesh.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
             .unwrap();
         let spec = PartialSpec::Scanner {

@@ -43,10 +43,57 @@ impl Category {
 
     /// Relative frequency when several categories are asked for: cars are most of what a
     /// mobile mapping car drives past.
-    fn weight(self) -> f64 {
+    pub fn default_weight(self) -> f64 {
         match self {
             Category::Car => 4.0,
             _ => 1.0,
+        }
+    }
+
+    fn named(name: &str) -> Option<Category> {
+        Category::ALL.into_iter().find(|c| c.name() == name)
+    }
+}
+
+/// A category and how often it is drawn, relative to the others of a run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Draw {
+    pub category: Category,
+    pub weight: f64,
+}
+
+impl From<Category> for Draw {
+    fn from(category: Category) -> Draw {
+        Draw {
+            category,
+            weight: category.default_weight(),
+        }
+    }
+}
+
+/// `NAME` (its default weight) or `NAME=WEIGHT`, the weight positive and finite.
+impl std::str::FromStr for Draw {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Draw, String> {
+        let (name, weight) = match s.split_once('=') {
+            Some((name, weight)) => (name, Some(weight)),
+            None => (s, None),
+        };
+        let names = Category::ALL.map(Category::name).join(", ");
+        let category = Category::named(name.trim())
+            .ok_or_else(|| format!("unknown category '{name}' (one of {names})"))?;
+        let Some(weight) = weight else {
+            return Ok(category.into());
+        };
+        match weight.trim().parse::<f64>() {
+            Ok(w) if w > 0.0 && w.is_finite() => Ok(Draw {
+                category,
+                weight: w,
+            }),
+            _ => Err(format!(
+                "{name}'s weight must be a positive number, got '{weight}'"
+            )),
         }
     }
 }
@@ -67,20 +114,20 @@ pub struct Synthesized {
 /// that many fill 10 GB, where a mistyped count would write until the disk is full.
 pub const MAX_OBJECTS: usize = 100_000;
 
-/// Object `index` of a run with `seed` over `categories` (weighted by `Category::weight`).
-/// Depends only on these three, not on how many objects the run makes.
-pub fn synthesize(index: usize, seed: u64, categories: &[Category]) -> Synthesized {
+/// Object `index` of a run with `seed` drawing from `draws` by their weights. Depends only on
+/// these three, not on how many objects the run makes.
+pub fn synthesize(index: usize, seed: u64, draws: &[Draw]) -> Synthesized {
     let object_seed = derive_seed(seed, &format!("synth/{index}"));
     let mut rng = Lcg::new(object_seed);
-    let total: f64 = categories.iter().map(|c| c.weight()).sum();
+    let total: f64 = draws.iter().map(|d| d.weight).sum();
     let mut x = rng.next_f64() * total;
-    let mut category = categories[categories.len() - 1];
-    for &c in categories {
-        if x < c.weight() {
-            category = c;
+    let mut category = draws[draws.len() - 1].category;
+    for d in draws {
+        if x < d.weight {
+            category = d.category;
             break;
         }
-        x -= c.weight();
+        x -= d.weight;
     }
     let (builder, variant) = match category {
         Category::Car => vehicles::car(&mut rng),
@@ -153,13 +200,58 @@ mod tests {
     use crate::datagen::scan::ground_truth;
     use std::path::Path;
 
+    fn all() -> [Draw; 5] {
+        Category::ALL.map(Draw::from)
+    }
+
+    #[test]
+    fn categories_are_drawn_by_their_weights() {
+        let draws: Vec<Draw> = ["car", "motorcycle=3"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let n = 400;
+        let motorcycles = (0..n)
+            .filter(|&i| synthesize(i, 4, &draws).category == Category::Motorcycle)
+            .count();
+        // 3 against car's 4: 3/7 of the draws, 171 of 400 (binomial sd 10).
+        assert!((141..=201).contains(&motorcycles), "{motorcycles}");
+    }
+
+    #[test]
+    fn a_draw_is_a_name_and_a_positive_weight() {
+        assert_eq!("bus".parse(), Ok(Draw::from(Category::Bus)));
+        assert_eq!(
+            " truck = 0.5".parse(),
+            Ok(Draw {
+                category: Category::Truck,
+                weight: 0.5
+            })
+        );
+        for (bad, says) in [
+            (
+                "boat",
+                "unknown category 'boat' (one of car, bus, truck, train, motorcycle)",
+            ),
+            ("car=0", "car's weight must be a positive number, got '0'"),
+            ("car=-1", "car's weight must be a positive number, got '-1'"),
+            (
+                "car=inf",
+                "car's weight must be a positive number, got 'inf'",
+            ),
+            ("car=", "car's weight must be a positive number, got ''"),
+        ] {
+            assert_eq!(bad.parse::<Draw>(), Err(says.to_string()));
+        }
+    }
+
     #[test]
     fn same_seed_same_object_other_seed_other_object() {
-        let a = synthesize(3, 7, &Category::ALL);
-        let b = synthesize(3, 7, &Category::ALL);
+        let a = synthesize(3, 7, &all());
+        let b = synthesize(3, 7, &all());
         assert_eq!(a.mesh.positions, b.mesh.positions);
         assert_eq!(a.name, b.name);
-        let c = synthesize(3, 8, &Category::ALL);
+        let c = synthesize(3, 8, &all());
         assert_ne!(a.mesh.positions, c.mesh.positions);
     }
 
@@ -167,7 +259,7 @@ mod tests {
     fn every_category_is_closed_and_vehicle_sized() {
         for (i, &category) in Category::ALL.iter().enumerate() {
             for k in 0..4 {
-                let s = synthesize(i * 10 + k, 1, &[category]);
+                let s = synthesize(i * 10 + k, 1, &[category.into()]);
                 assert_eq!(s.category, category);
                 let stats = s.mesh.check(Path::new(&s.name), usize::MAX).unwrap();
                 assert_eq!(stats.boundary_edges, 0, "{} {}", s.name, s.variant);
@@ -200,7 +292,7 @@ mod tests {
     #[test]
     fn ground_truth_of_synthetic_objects_has_no_holes() {
         for (i, &category) in Category::ALL.iter().enumerate() {
-            let mut m = synthesize(i, 5, &[category]).mesh;
+            let mut m = synthesize(i, 5, &[category.into()]).mesh;
             m.normalize(SignedAxis::PLUS_Y, SignedAxis::MINUS_Z)
                 .unwrap();
             let gt = ground_truth(&m, 256, 1.0 / 256.0).unwrap();
@@ -222,7 +314,7 @@ mod tests {
 
     #[test]
     fn contact_sheet_draws_each_object_in_its_tile() {
-        let objects: Vec<Synthesized> = (0..3).map(|i| synthesize(i, 2, &Category::ALL)).collect();
+        let objects: Vec<Synthesized> = (0..3).map(|i| synthesize(i, 2, &all())).collect();
         let meshes: Vec<&Mesh> = objects.iter().map(|o| &o.mesh).collect();
         let sheet = contact_sheet(&meshes, 64, 2);
         assert_eq!(sheet.dimensions(), (128, 128));

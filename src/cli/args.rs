@@ -340,7 +340,7 @@ pub struct CompleteArgs {
     /// mirrored back, joins its output (the default; the two passes run side by side).
     #[arg(long, overrides_with = "no_mirror_pass")]
     pub mirror_pass: bool,
-    /// One network pass, on the measured points alone: half the network's work, for one core.
+    /// One network pass, on the measured points alone: half the network's work.
     #[arg(long, overrides_with = "mirror_pass")]
     pub no_mirror_pass: bool,
     /// The vehicle's width in the input's units, when known (buses and lorries: 2.55 m in the

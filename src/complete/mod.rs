@@ -611,9 +611,10 @@ struct NetworkOutput {
 /// (which needs the symmetry `plane` for its width), timed. With a plane and
 /// [`Options::mirror_pass`] the network then completes the measured points' mirror image too,
 /// and its points, mirrored back, join the first pass's: a second opinion from views that see
-/// the other flank (docs/completing.md, *The mirrored pass*). The two passes run side by side
-/// on two threads: the CPU backend runs one pass on about one core, and a batch of two took
-/// 2.2–2.7× one object's time.
+/// the other flank (docs/completing.md, *The mirrored pass*). The two passes are one rayon
+/// join, as the CPU backend's matrix products are rayon tasks: on idle cores the passes run
+/// side by side and their products spread over the rest, while in a batch whose jobs fill the
+/// cores nothing waits on a thread of its own (docs/speed.md, *Threads*).
 fn run_network(
     input: &PointCloud,
     measured: &[[f64; 3]],
@@ -636,28 +637,21 @@ fn run_network(
         .filter(|_| options.mirror_pass)
         .map(|plane| Pass::mirrored(measured, plane));
     let cameras = &cameras;
-    let (output, second) = std::thread::scope(|scope| {
-        let second = second.map(|pass| {
-            scope.spawn(move || {
-                pass.run(
-                    colors,
-                    cameras,
-                    plane,
-                    inpainter,
-                    options,
-                    &mut Timings::default(),
-                )
+    let mut first_done = Instant::now();
+    let (output, second) = rayon::join(
+        || {
+            let output = first.run(colors, cameras, plane, inpainter, options, timings);
+            first_done = Instant::now();
+            output
+        },
+        || {
+            second.map(|pass| {
+                let mut own = Timings::default();
+                pass.run(colors, cameras, plane, inpainter, options, &mut own)
             })
-        });
-        let output = first.run(colors, cameras, plane, inpainter, options, timings);
-        let waiting = Instant::now();
-        let second = second.map(|h| {
-            h.join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
-        });
-        timings.mirror_pass = waiting.elapsed();
-        (output, second)
-    });
+        },
+    );
+    timings.mirror_pass = first_done.elapsed();
     let mut output = output?;
     if let Some(more) = second {
         let more = more?;

@@ -859,21 +859,13 @@ fn gap_fill(
     let merge = options.merge_distance;
     let gaps = match sure {
         None => between(predicted, merge, f64::INFINITY),
-        Some(sure) => joined(
-            between(predicted, options.near_distance, f64::INFINITY),
-            between(sure, merge, options.near_distance),
-        ),
+        Some(sure) => {
+            let mut gaps = between(predicted, options.near_distance, f64::INFINITY);
+            gaps.append(between(sure, merge, options.near_distance));
+            gaps
+        }
     };
     gaps.select(&thin::one_per_cube(&gaps.positions, options.thin))
-}
-
-/// `a`'s points followed by `b`'s: two clouds of the network's, positions and colours alone.
-fn joined(mut a: PointCloud, b: PointCloud) -> PointCloud {
-    a.positions.extend(b.positions);
-    if let (Some(colors), Some(more)) = (a.colors.as_mut(), b.colors) {
-        colors.extend(more);
-    }
-    a
 }
 
 /// The network's points, each taking its attributes from its nearest measured point.

@@ -4,7 +4,7 @@
 use assert_cmd::Command;
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::datagen::shapes;
-use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use mvpcc::io::{read_cloud, write_cloud, Encoding, Format};
 use mvpcc::metrics::compare_clouds;
 use predicates::prelude::*;
 use std::path::{Path, PathBuf};
@@ -476,6 +476,44 @@ fn an_output_folder_held_by_a_file_is_refused_by_every_command() {
     }
 }
 
+#[test]
+fn an_output_extension_no_format_has_is_refused_before_the_work() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "car.pcd", &car());
+    let views = dir.path().join("views");
+    mvpcc()
+        .args(["project", s(&input), s(&views), "--views", "5,6"])
+        .assert()
+        .success();
+    let typo = dir.path().join("out.plyy");
+    let problem = "unsupported output extension \"plyy\"";
+    fails(
+        &["complete", s(&input), s(&typo), "--method", "mirror"],
+        "out.plyy",
+        problem,
+        &typo,
+    );
+    fails(&["filter", s(&input), s(&typo)], "out.plyy", problem, &typo);
+    fails(
+        &["reproject", s(&views), s(&typo)],
+        "out.plyy",
+        "or pass --out-format",
+        &typo,
+    );
+    // `--out-format` names the format whatever the extension, and `complete` writes an output
+    // without an extension in the input's format.
+    mvpcc()
+        .args(["filter", s(&input), s(&typo), "--out-format", "ply"])
+        .assert()
+        .success();
+    assert!(std::fs::read(&typo).unwrap().starts_with(b"ply\n"));
+    let bare = dir.path().join("out");
+    mvpcc()
+        .args(["complete", s(&input), s(&bare), "--method", "mirror"])
+        .assert()
+        .success();
+    assert!(read_cloud(&bare, Some(Format::Pcd)).is_ok());
+}
 #[test]
 fn read_only_output_directory_fails_without_partial_files() {
     let dir = TempDir::new().unwrap();

@@ -56,6 +56,19 @@ impl Format {
             named => named,
         }
     }
+
+    /// The format a cloud is written in: `given` (`--out-format`), else the extension's. Checked
+    /// before the work, so that a mistyped extension fails at once instead of after it.
+    pub fn of_output(path: &Path, given: Option<Format>) -> Result<Format, Problem> {
+        match given {
+            Some(format) => Ok(format),
+            None if is_stdio(path) => Err(Problem::StdoutFormat),
+            None => Format::from_path(path).map_err(|problem| match problem {
+                Problem::UnsupportedExtension(ext) => Problem::UnsupportedOutputExtension(ext),
+                other => other,
+            }),
+        }
+    }
 }
 
 /// How PLY and PCD bodies are written (LAS and XYZ have one encoding each).
@@ -85,6 +98,8 @@ pub enum Problem {
     AllNonFinite(usize),
     #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt, csv or pts; or pass --format)")]
     UnsupportedExtension(String),
+    #[error("unsupported output extension {0:?} (expected ply, pcd, las, laz, xyz, txt, csv or pts; or pass --out-format)")]
+    UnsupportedOutputExtension(String),
     #[error("standard output has no extension to tell the format: pass --out-format")]
     StdoutFormat,
     #[error("header declares {declared} points but the file holds only {found}")]
@@ -233,6 +248,11 @@ pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIo
     })
 }
 
+/// [`Format::of_output`], the error naming `path`.
+pub fn output_format(path: &Path, given: Option<Format>) -> Result<Format, CloudIoError> {
+    Format::of_output(path, given).map_err(|problem| CloudIoError::new(path, problem))
+}
+
 /// Writes a cloud atomically; the format comes from the extension unless `format` is given.
 /// `-` writes standard output, which needs `format`.
 pub fn write_cloud(
@@ -245,10 +265,7 @@ pub fn write_cloud(
         return write_stdout(cloud, format, encoding);
     }
     let err = |problem| CloudIoError::new(path, problem);
-    let format = match format {
-        Some(f) => f,
-        None => Format::from_path(path).map_err(err)?,
-    };
+    let format = output_format(path, format)?;
     match format {
         Format::Las | Format::Laz => write_las(path, cloud, format == Format::Laz),
         Format::Ply => {
@@ -568,6 +585,29 @@ mod tests {
             Format::from_path(Path::new("a.obj")),
             Err(Problem::UnsupportedExtension(e)) if e == "obj"
         ));
+    }
+
+    #[test]
+    fn an_output_format_is_given_or_named_and_its_error_points_to_out_format() {
+        let ply = Some(Format::Ply);
+        assert_eq!(
+            Format::of_output(Path::new("a.obj"), ply).unwrap(),
+            Format::Ply
+        );
+        assert_eq!(Format::of_output(Path::new("-"), ply).unwrap(), Format::Ply);
+        assert_eq!(
+            Format::of_output(Path::new("a.pcd"), None).unwrap(),
+            Format::Pcd
+        );
+        assert!(matches!(
+            Format::of_output(Path::new("-"), None),
+            Err(Problem::StdoutFormat)
+        ));
+        let typo = Format::of_output(Path::new("a.plyy"), None).unwrap_err();
+        assert!(
+            typo.to_string().ends_with("or pass --out-format)"),
+            "{typo}"
+        );
     }
 
     #[cfg(unix)]

@@ -158,14 +158,18 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
     }
 }
 
-/// The output format: `--out-format`, else OUT's extension, else the input's format.
+/// The output format: `--out-format`, else OUT's extension, else (standard output or no
+/// extension) the input's format. An extension no format has is refused rather than read as
+/// none: `out.plyy` written as the input's PCD would be a surprise.
 fn output_format(args: &CompleteArgs, input: &Path, output: &Path) -> anyhow::Result<Format> {
-    if let Some(f) = args.output_options.out_format {
-        return Ok(f);
-    }
-    Format::from_path(output)
-        .or_else(|_| Format::of_input(input, args.input_options.format))
-        .map_err(|e| anyhow!("{}: {e}", output.display()))
+    let given = args.output_options.out_format;
+    let named = output.extension().is_some() && !is_stdio(output);
+    let format = if given.is_some() || named {
+        Format::of_output(output, given)
+    } else {
+        Format::of_input(input, args.input_options.format)
+    };
+    format.map_err(|e| anyhow!("{}: {e}", output.display()))
 }
 
 /// What `complete --json` reports for one file.

@@ -2,7 +2,7 @@ use super::Log;
 use crate::cli::args::ReprojectArgs;
 use anyhow::bail;
 use mvpcc::complete::filter::inliers;
-use mvpcc::io::{check_output, write_cloud};
+use mvpcc::io::{check_output, output_format, write_cloud};
 use mvpcc::views::reprojection::{reproject, ReprojectOptions};
 use mvpcc::views::{color_path, find_views, locations_path, read_views, ViewsInfo, INFO_FILE};
 use std::path::{Path, PathBuf};
@@ -17,6 +17,7 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
         &args.output,
         &inputs.iter().map(|p| p.as_path()).collect::<Vec<_>>(),
     )?;
+    output_format(&args.output, args.output_options.out_format)?;
     let views = read_views(&args.viewdir, Some(&cameras))?;
     let merged = reproject(
         &views,

@@ -427,7 +427,10 @@ fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
         .args(["train", "--data", s(dir.path()), "--out", s(&fresh)])
         .assert()
         .failure()
-        .stderr(predicate::str::contains("not a shapenet-views directory"));
+        .stderr(format!(
+            "error: {}: not a shapenet-views directory (no GT/train folder)\n",
+            dir.path().display()
+        ));
     assert!(
         !fresh.exists(),
         "refused data leaves no run directory behind"

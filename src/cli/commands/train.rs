@@ -8,6 +8,7 @@ use clap::ValueEnum;
 use indicatif::ProgressBar;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{ModelConfig, Preset};
+use mvpcc::train::dataset::scan_split;
 use mvpcc::train::{
     train, InitWeights, Job, LogRecord, Monitor, Outcome, Summary, TrainSettings, CONFIG_FILE,
     SETTINGS_FILE,
@@ -295,6 +296,8 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     let run = args.out.clone().unwrap_or_else(|| default_run(&args.data));
     super::check_out_dir(&run)?;
     let (settings, model) = resolve(&args, &run)?;
+    // Before anything is said, so that a wrong path gets its one error line alone.
+    scan_split(&args.data, "train")?;
     let opened = super::open_device(args.device, log)?;
     log.info(format!(
         "training {} ({} views of {}², width {}, {} residual blocks, {:?}) on {} into {}",

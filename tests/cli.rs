@@ -343,6 +343,60 @@ fn nan_points_are_dropped_with_a_warning() {
 }
 
 #[test]
+fn missing_folders_and_lists_are_said_in_the_readers_words() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("out.ply");
+    let outdir = dir.path().join("outdir");
+    let nowhere = dir.path().join("nowhere");
+    let file = write_bytes(&dir, "cloud.xyz", b"0 0 0\n");
+    let folder = dir.path().join("afolder");
+    std::fs::create_dir(&folder).unwrap();
+    let (nowhere, file, folder) = (s(&nowhere), s(&file), s(&folder));
+    fails(
+        &["reproject", nowhere, s(&out)],
+        "nowhere",
+        "no such directory",
+        &out,
+    );
+    fails(
+        &["reproject", file, s(&out)],
+        "cloud.xyz",
+        "not a directory",
+        &out,
+    );
+    let views = [
+        "eval",
+        "--metrics",
+        "psnr",
+        "--pred-views",
+        folder,
+        "--gt-views",
+        nowhere,
+    ];
+    fails(&views, "nowhere", "no such directory", &out);
+    let clouds = ["eval", "--pred-dir", folder, "--gt-dir", nowhere];
+    fails(&clouds, "nowhere", "no such directory", &out);
+    let listed = |list| {
+        [
+            "complete",
+            "--input-dir",
+            folder,
+            "--list",
+            list,
+            "--output-dir",
+            s(&outdir),
+        ]
+    };
+    fails(&listed(nowhere), "nowhere", "no such file", &outdir);
+    fails(
+        &listed(folder),
+        "afolder",
+        "is a directory, not a list of paths",
+        &outdir,
+    );
+}
+
+#[test]
 fn bad_inputs_fail_cleanly() {
     let dir = TempDir::new().unwrap();
     let out = dir.path().join("out.ply");
@@ -627,8 +681,8 @@ fn profile_reports_a_median_and_a_breakdown() {
     let stderr = String::from_utf8(out.stderr.clone()).unwrap();
     if !cfg!(feature = "wgpu") {
         assert!(stderr.contains(
-            "warning: this mvpcc was built without CUDA (cargo feature `cuda`); this mvpcc was \
-             built without wgpu (cargo feature `wgpu`); running on the CPU"
+            "warning: this mvpcc was built without CUDA (cargo feature `cuda`) or wgpu (cargo \
+             feature `wgpu`); running on the CPU\n"
         ));
     }
     // Asked for one backend it lacks, it stops with one line.

@@ -6,7 +6,9 @@
 //! take every file exactly once, whatever order they list it in and whichever files are added
 //! to the folder later.
 
+use super::{read_dir, DirProblem, Problem};
 use std::collections::HashSet;
+use std::io::ErrorKind;
 use std::path::{Component, Path, PathBuf};
 use thiserror::Error;
 
@@ -24,11 +26,10 @@ pub fn default_jobs() -> usize {
 
 #[derive(Debug, Error)]
 pub enum BatchError {
-    #[error("{}: cannot list: {source}", path.display())]
-    List {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    #[error("{}: {source}", path.display())]
+    List { path: PathBuf, source: DirProblem },
+    #[error("{}: {source}", path.display())]
+    ListFile { path: PathBuf, source: Problem },
     #[error("{}:{line}: {problem}", path.display())]
     ListEntry {
         path: PathBuf,
@@ -134,8 +135,8 @@ pub fn walk(dir: &Path, wanted: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>, 
             path: d.clone(),
             source,
         };
-        for entry in std::fs::read_dir(&d).map_err(list_error)? {
-            let entry = entry.map_err(list_error)?;
+        for entry in read_dir(&d).map_err(list_error)? {
+            let entry = entry.map_err(|e| list_error(DirProblem::Io(e)))?;
             if entry.file_name().to_string_lossy().starts_with('.') {
                 continue;
             }
@@ -156,9 +157,16 @@ pub fn walk(dir: &Path, wanted: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>, 
 /// must lie under it. A line that climbs out (`..`) is refused, since its output would land
 /// outside the output folder; a path listed twice is taken once.
 pub fn read_list(list: &Path, base: &Path) -> Result<Vec<PathBuf>, BatchError> {
-    let text = std::fs::read_to_string(list).map_err(|source| BatchError::List {
+    let text = std::fs::read_to_string(list).map_err(|e| BatchError::ListFile {
         path: list.to_path_buf(),
-        source,
+        source: match e.kind() {
+            ErrorKind::NotFound => Problem::NotFound,
+            ErrorKind::IsADirectory => {
+                Problem::Malformed("is a directory, not a list of paths".into())
+            }
+            ErrorKind::InvalidData => Problem::Malformed("not UTF-8 text".into()),
+            _ => Problem::Io(e),
+        },
     })?;
     let mut seen = HashSet::new();
     let mut files = Vec::new();

@@ -191,6 +191,27 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, Problem> {
     })
 }
 
+/// Why a directory cannot be listed, the usual cases in the words the cloud readers use rather
+/// than the OS's.
+#[derive(Debug, Error)]
+pub enum DirProblem {
+    #[error("no such directory")]
+    NotFound,
+    #[error("not a directory")]
+    NotADirectory,
+    #[error("cannot list: {0}")]
+    Io(std::io::Error),
+}
+
+/// Lists a directory; see [`DirProblem`].
+pub fn read_dir(path: &Path) -> Result<std::fs::ReadDir, DirProblem> {
+    std::fs::read_dir(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => DirProblem::NotFound,
+        std::io::ErrorKind::NotADirectory => DirProblem::NotADirectory,
+        _ => DirProblem::Io(e),
+    })
+}
+
 /// Reads a cloud; the format comes from the extension unless `format` is given. `-` reads
 /// standard input, and a pipe or device is read like it (see [`stdio`]).
 ///

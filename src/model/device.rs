@@ -29,11 +29,39 @@ pub struct Opened {
 #[error("--device {backend}: {why}")]
 pub struct DeviceError {
     backend: &'static str,
-    why: String,
+    why: Unavailable,
+}
+
+/// Why a GPU backend cannot run here.
+#[derive(Debug)]
+enum Unavailable {
+    #[cfg_attr(all(feature = "cuda", feature = "wgpu"), allow(dead_code))]
+    NotBuilt { backend: &'static str },
+    #[cfg_attr(not(any(feature = "cuda", feature = "wgpu")), allow(dead_code))]
+    NoDevice(String),
+}
+
+impl std::fmt::Display for Unavailable {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self {
+            Unavailable::NotBuilt { backend } => {
+                write!(f, "this mvpcc was built without {}", built(backend))
+            }
+            Unavailable::NoDevice(why) => f.write_str(why),
+        }
+    }
+}
+
+/// "CUDA (cargo feature `cuda`)": how a missing backend is named.
+fn built(backend: &str) -> String {
+    format!(
+        "{backend} (cargo feature `{}`)",
+        backend.to_ascii_lowercase()
+    )
 }
 
 pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
-    let explicit = |backend, opened: Result<(Device, String), String>| {
+    let explicit = |backend, opened: Result<(Device, String), Unavailable>| {
         opened
             .map(found)
             .map_err(|why| DeviceError { backend, why })
@@ -64,18 +92,32 @@ fn cpu(fallback: Option<String>) -> Opened {
 
 fn open_any_gpu() -> Opened {
     open_cuda()
-        .or_else(|cuda| open_wgpu().map_err(|wgpu| format!("{cuda}; {wgpu}; running on the CPU")))
+        .or_else(|cuda| {
+            open_wgpu().map_err(|wgpu| format!("{}; running on the CPU", both(&cuda, &wgpu)))
+        })
         .map_or_else(|why| cpu(Some(why)), found)
 }
 
+/// Two backends the build lacks are said in one clause, not two alike.
+fn both(cuda: &Unavailable, wgpu: &Unavailable) -> String {
+    match (cuda, wgpu) {
+        (Unavailable::NotBuilt { backend: a }, Unavailable::NotBuilt { backend: b }) => {
+            format!("this mvpcc was built without {} or {}", built(a), built(b))
+        }
+        _ => format!("{cuda}; {wgpu}"),
+    }
+}
+
 #[cfg(feature = "cuda")]
-fn open_cuda() -> Result<(Device, String), String> {
+fn open_cuda() -> Result<(Device, String), Unavailable> {
     use burn::tensor::DeviceType;
     let device = Device::enumerate(DeviceType::Cuda)
         .into_vec()
         .into_iter()
         .next()
-        .ok_or_else(|| "no CUDA device answers (no NVIDIA driver or no GPU)".to_string())?;
+        .ok_or_else(|| {
+            Unavailable::NoDevice("no CUDA device answers (no NVIDIA driver or no GPU)".to_string())
+        })?;
     let name = device
         .identity()
         .map_or_else(|| "unnamed CUDA device".to_string(), |i| i.name);
@@ -83,30 +125,30 @@ fn open_cuda() -> Result<(Device, String), String> {
 }
 
 #[cfg(not(feature = "cuda"))]
-fn open_cuda() -> Result<(Device, String), String> {
-    Err("this mvpcc was built without CUDA (cargo feature `cuda`)".to_string())
+fn open_cuda() -> Result<(Device, String), Unavailable> {
+    Err(Unavailable::NotBuilt { backend: "CUDA" })
 }
 
 #[cfg(feature = "wgpu")]
-fn open_wgpu() -> Result<(Device, String), String> {
+fn open_wgpu() -> Result<(Device, String), Unavailable> {
     let device = Device::wgpu_options()
         .init()
-        .map_err(|e| format!("no usable wgpu adapter ({e})"))?;
+        .map_err(|e| Unavailable::NoDevice(format!("no usable wgpu adapter ({e})")))?;
     let identity = device.identity();
     let name = identity
         .as_ref()
         .map_or_else(|| "unnamed adapter".to_string(), |i| i.name.clone());
     if is_software_adapter(&name, identity.is_some_and(|i| i.physical.is_none())) {
-        return Err(format!(
+        return Err(Unavailable::NoDevice(format!(
             "the only wgpu adapter is the software rasterizer {name}"
-        ));
+        )));
     }
     Ok((device, format!("GPU ({name}, wgpu)")))
 }
 
 #[cfg(not(feature = "wgpu"))]
-fn open_wgpu() -> Result<(Device, String), String> {
-    Err("this mvpcc was built without wgpu (cargo feature `wgpu`)".to_string())
+fn open_wgpu() -> Result<(Device, String), Unavailable> {
+    Err(Unavailable::NotBuilt { backend: "wgpu" })
 }
 
 /// Whether tensors on `device` run on flex, Burn's CPU backend: layers pick their CPU or GPU

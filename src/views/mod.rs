@@ -25,6 +25,11 @@ pub enum ViewError {
     Decode { path: PathBuf, message: String },
     #[error("{}: {problem}", path.display())]
     Invalid { path: PathBuf, problem: String },
+    #[error("{}: {source}", path.display())]
+    Dir {
+        path: PathBuf,
+        source: crate::io::DirProblem,
+    },
     #[error("{}: no locations_NNN.png view images in this directory", path.display())]
     NoViews { path: PathBuf },
     #[error("{}: view {camera:03} is missing", path.display())]
@@ -197,7 +202,7 @@ fn open(path: &Path) -> Result<image::DynamicImage, ViewError> {
 
 /// Rig cameras that have a `locations_NNN.png` in `dir`, ascending.
 pub fn find_views(dir: &Path) -> Result<Vec<usize>, ViewError> {
-    let entries = std::fs::read_dir(dir).map_err(|source| ViewError::Io {
+    let entries = crate::io::read_dir(dir).map_err(|source| ViewError::Dir {
         path: dir.to_path_buf(),
         source,
     })?;

@@ -784,8 +784,9 @@ fn saved_views_are_the_datasets_format_and_eval_scores_them() {
         .stderr(predicate::str::contains("no views to save"));
 }
 
-/// `--preview` once wrote its PNG over the input cloud it was given as a path; a preview or
-/// views path that cannot be written is now refused before anything is.
+/// `--preview` once wrote its PNG over the input cloud it was given as a path, a `.gif` preview
+/// was a PNG under that name, and `--save-views` naming the output made a folder there and then
+/// failed; a preview or views path that cannot be written is now refused before anything is.
 #[test]
 fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
     let dir = TempDir::new().unwrap();
@@ -794,7 +795,9 @@ fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
     let before = std::fs::read(&input).unwrap();
     let output = dir.path().join("done.ply");
     let missing = dir.path().join("missing").join("p.png");
-    let cases: [(&[&str], &str); 4] = [
+    let gif = dir.path().join("p.gif");
+    let png = dir.path().join("p.png");
+    let cases: [(&[&str], &str); 7] = [
         (
             &["--preview", s(&input)],
             "output would overwrite the input file",
@@ -808,6 +811,18 @@ fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
             &["--save-views", s(&input)],
             "--save-views needs a directory",
         ),
+        (
+            &["--preview", s(&gif)],
+            "unsupported preview extension \"gif\" (expected png, jpg or jpeg)",
+        ),
+        (
+            &["--save-views", s(&output)],
+            "--save-views names an output file",
+        ),
+        (
+            &["--save-views", s(&png), "--preview", s(&png)],
+            "--save-views names an output file",
+        ),
     ];
     for (extra, problem) in cases {
         mvpcc()
@@ -817,6 +832,10 @@ fn a_preview_or_views_path_never_takes_the_place_of_a_cloud() {
             .failure()
             .stderr(predicate::str::contains(problem));
         assert!(!output.exists(), "{extra:?} wrote the output");
+        assert!(
+            !gif.exists() && !png.exists(),
+            "{extra:?} wrote a preview or views"
+        );
         assert_eq!(std::fs::read(&input).unwrap(), before, "{extra:?}");
     }
 }

@@ -417,8 +417,8 @@ pub struct CompleteArgs {
         default_value_t = Options::default().thin
     )]
     pub thin: f64,
-    /// Write a PNG (JPEG for .jpg/.jpeg) of input and output from three viewpoints, completed
-    /// points tinted.
+    /// Write a PNG (JPEG for .jpg/.jpeg; other extensions are refused) of input and output
+    /// from three viewpoints, completed points tinted.
     #[arg(long, conflicts_with = "output_dir")]
     pub preview: Option<PathBuf>,
     /// Print the time of each stage (the paper's Table 4 breakdown).

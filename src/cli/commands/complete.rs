@@ -295,7 +295,8 @@ fn complete_file(
 }
 
 /// Refuses, before anything is read, an output or `--preview` that would take the place of the
-/// input, a preview over the output, and `--save-views` naming a file.
+/// input, a preview over the output or in a format it cannot be written in, and `--save-views`
+/// naming a file or an output.
 fn check_paths(
     input: &Path,
     output: &Path,
@@ -311,11 +312,34 @@ fn check_paths(
         if same_file(preview, output) {
             bail!("{}: --preview names the output cloud", preview.display());
         }
+        preview_format(preview)?;
     }
-    if let Some(dir) = views.filter(|d| d.exists() && !d.is_dir()) {
-        bail!("{}: --save-views needs a directory", dir.display());
+    if let Some(dir) = views {
+        if dir.exists() && !dir.is_dir() {
+            bail!("{}: --save-views needs a directory", dir.display());
+        }
+        let preview = args.preview.as_deref();
+        if same_file(dir, output) || preview.is_some_and(|p| same_file(dir, p)) {
+            bail!("{}: --save-views names an output file", dir.display());
+        }
     }
     Ok(())
+}
+
+/// The preview's image format, by its extension: JPEG for `.jpg`/`.jpeg`, PNG for `.png` or
+/// none; any other is refused before the work rather than written as PNG under its name.
+fn preview_format(path: &Path) -> anyhow::Result<image::ImageFormat> {
+    let extension = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match extension.as_deref() {
+        None | Some("png") => Ok(image::ImageFormat::Png),
+        Some("jpg" | "jpeg") => Ok(image::ImageFormat::Jpeg),
+        Some(other) => bail!(
+            "{}: unsupported preview extension \"{other}\" (expected png, jpg or jpeg)",
+            path.display()
+        ),
+    }
 }
 
 /// The line logged for one completed file.
@@ -412,10 +436,7 @@ fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> anyhow::
         plane: done.plane.map(|p| p.offset),
     };
     let img = render(&left, &right);
-    let format = match image::ImageFormat::from_path(path) {
-        Ok(image::ImageFormat::Jpeg) => image::ImageFormat::Jpeg,
-        _ => image::ImageFormat::Png,
-    };
+    let format = preview_format(path)?;
     atomic_write(path, |w| {
         img.write_to(w, format).map_err(std::io::Error::other)
     })

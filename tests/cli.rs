@@ -358,6 +358,8 @@ fn missing_folders_and_lists_are_said_in_the_readers_words() {
         "no such directory",
         &out,
     );
+    let chosen = ["reproject", nowhere, s(&out), "--views", "9"];
+    fails(&chosen, "nowhere", "no such directory", &out);
     fails(
         &["reproject", file, s(&out)],
         "cloud.xyz",

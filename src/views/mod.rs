@@ -229,7 +229,14 @@ pub fn find_views(dir: &Path) -> Result<Vec<usize>, ViewError> {
 /// a `color_NNN.png`; a later view without one keeps zero RGB.
 pub fn read_views(dir: &Path, cameras: Option<&[usize]>) -> Result<ViewImages, ViewError> {
     let cameras = match cameras {
-        Some(c) => c.to_vec(),
+        Some(c) => {
+            // A missing folder is said as such, not as its first view missing.
+            crate::io::read_dir(dir).map_err(|source| ViewError::Dir {
+                path: dir.to_path_buf(),
+                source,
+            })?;
+            c.to_vec()
+        }
         None => find_views(dir)?,
     };
     let mut images: Option<ViewImages> = None;

@@ -409,7 +409,7 @@ pub struct CompleteArgs {
     )]
     pub box_margin: f64,
     /// The network's added points are thinned to one per cube of this side (a share of the
-    /// object's size: 0.03125 is 2 pixels of a 64² view, 4 of a 128² one); 0 keeps them all.
+    /// object's size: 0.025 is 3.2 pixels of a 128² view); 0 keeps them all.
     #[arg(
         long,
         value_name = "D",

@@ -179,7 +179,7 @@ impl Default for Options {
             near_distance: 0.12,
             near_occupancy: 0.5,
             box_margin: 0.025,
-            thin: 0.03125,
+            thin: 0.025,
             symmetry: true,
             mirror_pass: true,
             symmetric_frame: true,

@@ -200,12 +200,16 @@ fn open(path: &Path) -> Result<image::DynamicImage, ViewError> {
     })
 }
 
-/// Rig cameras that have a `locations_NNN.png` in `dir`, ascending.
-pub fn find_views(dir: &Path) -> Result<Vec<usize>, ViewError> {
-    let entries = crate::io::read_dir(dir).map_err(|source| ViewError::Dir {
+fn list(dir: &Path) -> Result<std::fs::ReadDir, ViewError> {
+    crate::io::read_dir(dir).map_err(|source| ViewError::Dir {
         path: dir.to_path_buf(),
         source,
-    })?;
+    })
+}
+
+/// Rig cameras that have a `locations_NNN.png` in `dir`, ascending.
+pub fn find_views(dir: &Path) -> Result<Vec<usize>, ViewError> {
+    let entries = list(dir)?;
     let mut cameras: Vec<usize> = entries
         .filter_map(|e| e.ok())
         .filter_map(|e| {
@@ -231,10 +235,7 @@ pub fn read_views(dir: &Path, cameras: Option<&[usize]>) -> Result<ViewImages, V
     let cameras = match cameras {
         Some(c) => {
             // A missing folder is said as such, not as its first view missing.
-            crate::io::read_dir(dir).map_err(|source| ViewError::Dir {
-                path: dir.to_path_buf(),
-                source,
-            })?;
+            list(dir)?;
             c.to_vec()
         }
         None => find_views(dir)?,

@@ -314,8 +314,14 @@ fn sizes_and_batches_beyond_the_limits() {
         (
             project,
             ["--size", "100000"],
-            "image size 100000",
+            "--size: image size 100000",
             "above the largest this build renders (4096)",
+        ),
+        (
+            project,
+            ["--size", "0"],
+            "--size: image size",
+            "must be at least 8 pixels, got 0",
         ),
         (
             prepare,

@@ -16,6 +16,10 @@ pub const REFERENCE_FOCAL: f64 = 480.0;
 /// take gigabytes, and a side of 100,000 asked a projection for 960 GB and aborted.
 pub const MAX_IMAGE_SIZE: usize = 4096;
 
+/// The smallest image side a camera renders: below it the rig's views hold too few pixels to
+/// show any shape.
+pub const MIN_IMAGE_SIZE: usize = 8;
+
 #[derive(Debug, Error, PartialEq)]
 pub enum CameraError {
     #[error("camera index {0} is outside the rig (1..={RIG_SIZE})")]
@@ -26,7 +30,7 @@ pub enum CameraError {
     NoViews,
     #[error("'{0}' is not a camera index")]
     NotAnIndex(String),
-    #[error("image size must be at least 8 pixels, got {0}")]
+    #[error("image size must be at least {MIN_IMAGE_SIZE} pixels, got {0}")]
     TooSmall(usize),
     #[error("image size {0} is above the largest this build renders ({MAX_IMAGE_SIZE})")]
     TooLarge(usize),
@@ -84,7 +88,7 @@ impl Camera {
         if !(1..=RIG_SIZE).contains(&index) {
             return Err(CameraError::OutOfRange(index));
         }
-        if size < 8 {
+        if size < MIN_IMAGE_SIZE {
             return Err(CameraError::TooSmall(size));
         }
         if size > MAX_IMAGE_SIZE {

@@ -5,7 +5,7 @@
 pub mod projection;
 pub mod reprojection;
 
-use crate::core::camera::RIG_SIZE;
+use crate::core::camera::{MIN_IMAGE_SIZE, RIG_SIZE};
 use crate::core::frame::{Frame, UpAxis};
 use crate::io::atomic_write;
 use crate::views::projection::{ViewImages, CHANNELS};
@@ -290,9 +290,9 @@ fn read_locations(dir: &Path, camera: usize) -> Result<ImageBuffer<Rgb<u16>, Vec
         }
     };
     let (w, h) = locations.dimensions();
-    if w != h || w < 8 {
+    if w != h || (w as usize) < MIN_IMAGE_SIZE {
         return Err(invalid(format!(
-            "expected a square image of at least 8 px, found {w}×{h}"
+            "expected a square image of at least {MIN_IMAGE_SIZE} px, found {w}×{h}"
         )));
     }
     Ok(locations)

@@ -1,7 +1,7 @@
 use super::{synth, Log};
 use crate::cli::args::PrepareArgs;
 use anyhow::{bail, Context};
-use mvpcc::core::camera::{check_view_set, MAX_IMAGE_SIZE};
+use mvpcc::core::camera::{check_view_set, MAX_IMAGE_SIZE, MIN_IMAGE_SIZE};
 use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
     Source, ViewsFrame, MANIFEST_FILE, MAX_SAMPLES, PARAMS_FILE, TEST, TRAIN,
@@ -204,8 +204,8 @@ fn check(args: &PrepareArgs) -> anyhow::Result<()> {
     if let Some(count) = args.synth {
         synth::check_count(count, "--synth")?;
     }
-    if args.size < 8 || args.gt_size < 8 {
-        bail!("--size and --gt-size must be at least 8 pixels");
+    if args.size.min(args.gt_size) < MIN_IMAGE_SIZE {
+        bail!("--size and --gt-size must be at least {MIN_IMAGE_SIZE} pixels");
     }
     if args.size.max(args.gt_size) > MAX_IMAGE_SIZE {
         bail!("--size and --gt-size must be at most {MAX_IMAGE_SIZE} pixels");

@@ -1,7 +1,7 @@
 use super::{load, Log};
 use crate::cli::args::ProjectArgs;
 use anyhow::Context;
-use mvpcc::core::camera::Camera;
+use mvpcc::core::camera::{Camera, CameraError};
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::Format;
 use mvpcc::views::projection::project;
@@ -17,7 +17,10 @@ pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
 }
 
 pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
-    let cameras = Camera::set(&args.views.0, args.size)?;
+    let cameras = Camera::set(&args.views.0, args.size).map_err(|e| match e {
+        CameraError::TooSmall(_) | CameraError::TooLarge(_) => anyhow::anyhow!("--size: {e}"),
+        other => other.into(),
+    })?;
     let outdir = &args.outdir;
     super::check_out_dir(outdir)?;
     let cloud = load(&args.input, args.input_options.format, log)?;

@@ -723,6 +723,31 @@ fn profile_reports_a_median_and_a_breakdown() {
     );
 }
 
+/// Without `--config` the shape profiled is the built-in model's, the one `complete` runs
+/// (here at 32² to keep the debug build quick): it was the larger `cpu` preset's.
+#[test]
+fn profile_times_the_built_in_models_shape_by_default() {
+    let out = mvpcc()
+        .args([
+            "profile", "--size", "32", "--runs", "1", "--warmup", "0", "--json",
+        ])
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let builtin = &json["config"];
+    assert_eq!(builtin["size"], 32);
+    assert_eq!(builtin["width"], 48);
+    assert_eq!(builtin["res_blocks"], 2);
+    assert_eq!(builtin["padding"], "zero");
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        stderr.starts_with("profiling the forward of the built-in model on "),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn profile_train_times_whole_gan_steps_phase_by_phase() {
     let out = mvpcc()

@@ -6,7 +6,7 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::SorParams;
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
-use mvpcc::complete::{Method, Options, Roll};
+use mvpcc::complete::{Method, Options, Roll, DEFAULT_MODEL};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -17,6 +17,7 @@ use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
+use mvpcc::model::weights::{read_config, Network, WeightsError};
 use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
@@ -496,9 +497,10 @@ pub struct FilterArgs {
 
 #[derive(Debug, Args)]
 pub struct ProfileArgs {
-    /// Model shape (a preset; the options below override its fields).
-    #[arg(long, value_enum, default_value_t = Preset::Cpu)]
-    pub config: Preset,
+    /// Model shape: a preset, else the built-in model's (the one `complete` runs); the options
+    /// below override its fields.
+    #[arg(long, value_enum)]
+    pub config: Option<Preset>,
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// View image side in pixels.
@@ -539,15 +541,19 @@ pub struct ProfileArgs {
 }
 
 impl ProfileArgs {
-    pub fn model_config(&self) -> ModelConfig {
-        let mut c = self.config.config();
+    /// The preset's config, or the built-in model's, with the options' overrides.
+    pub fn model_config(&self) -> Result<ModelConfig, WeightsError> {
+        let mut c = match self.config {
+            Some(preset) => preset.config(),
+            None => read_config(DEFAULT_MODEL, Network::Generator)?,
+        };
         c.size = self.size.unwrap_or(c.size);
         c.width = self.width.unwrap_or(c.width);
         c.res_blocks = self.res_blocks.unwrap_or(c.res_blocks);
         c.views = self.views.unwrap_or(c.views);
         c.channels = self.channels.unwrap_or(c.channels);
         c.padding = self.padding.unwrap_or(c.padding);
-        c
+        Ok(c)
     }
 }
 

@@ -109,9 +109,9 @@ pub struct ModelConfig {
 pub enum Preset {
     /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
     Paper,
-    /// The CPU default, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero padding,
-    /// the largest shape whose whole `complete` stayed within a second on two cores when chosen
-    /// (2026-12-01; a later day's slower forward is in docs/speed.md).
+    /// `train`'s default shape, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero
+    /// padding, the largest whose whole `complete` stayed within a second on two cores when
+    /// chosen (2026-12-01). The built-in model is narrower: w 48, r 2.
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
     Small,

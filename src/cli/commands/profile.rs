@@ -40,7 +40,7 @@ struct Part {
 }
 
 pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
-    let config = args.model_config();
+    let config = args.model_config().context("the built-in model")?;
     config.validate().context("model config")?;
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
@@ -52,13 +52,14 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
     let opened = super::open_device(args.device, log)?;
     args.layers.set();
     log.info(format!(
-        "profiling {} of {:?} on {}: {}, batch {}, {:?} layers",
+        "profiling {} of {} on {}: {}, batch {}, {:?} layers",
         if args.train {
             "training steps"
         } else {
             "the forward"
         },
-        args.config,
+        args.config
+            .map_or("the built-in model".to_string(), |p| format!("{p:?}")),
         opened.description,
         describe(&config),
         args.batch,

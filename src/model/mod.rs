@@ -111,7 +111,7 @@ pub enum Preset {
     Paper,
     /// `train`'s default shape, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero
     /// padding, the largest whose whole `complete` stayed within a second on two cores when
-    /// chosen (2026-12-01). The built-in model is narrower: w 48, r 2.
+    /// chosen (2026-12-01). The built-in model has a shape of its own (`mvpcc profile` times it).
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
     Small,

@@ -177,6 +177,16 @@ const LIMITS: [(&str, usize); 5] = [
 pub const MAX_BATCH: usize = 1024;
 
 impl ModelConfig {
+    /// The shape in words, for the logs of `train` and `profile`: "4 views of 128², width 48,
+    /// 2 residual blocks, xyzrgb, zero padding".
+    pub fn describe(&self) -> String {
+        format!(
+            "{} views of {}², width {}, {} residual blocks, {:?}, {:?} padding",
+            self.views, self.size, self.width, self.res_blocks, self.channels, self.padding
+        )
+        .to_lowercase()
+    }
+
     /// Sizes the layers cannot work with: the two stride-2 stages and the discriminator's
     /// three need `S` divisible by 4 and its 4×4 stride-1 tail at least 32 pixels.
     pub fn validate(&self) -> Result<(), ConfigError> {

@@ -52,18 +52,19 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
     let opened = super::open_device(args.device, log)?;
     args.layers.set();
     log.info(format!(
-        "profiling {} of {} on {}: {}, batch {}, {:?} layers",
+        "profiling {} of {} on {}: {}, batch {}, {} layers",
         if args.train {
             "training steps"
         } else {
             "the forward"
         },
-        args.config
-            .map_or("the built-in model".to_string(), |p| format!("{p:?}")),
+        args.config.map_or("the built-in model".to_string(), |p| {
+            format!("the {p:?} preset").to_lowercase()
+        }),
         opened.description,
-        describe(&config),
+        config.describe(),
         args.batch,
-        args.layers,
+        format!("{:?}", args.layers).to_lowercase(),
     ));
     let mut report = if args.train {
         train_steps(&args, &config, opened.device)?
@@ -197,14 +198,6 @@ fn print(report: &Report, json: bool) -> anyhow::Result<()> {
     }
     println!("{}_ms_median={:.1}", report.measured, report.median_ms);
     Ok(())
-}
-
-fn describe(config: &ModelConfig) -> String {
-    format!(
-        "w {} r {} S {} V {} {:?} {:?} padding",
-        config.width, config.res_blocks, config.size, config.views, config.channels, config.padding
-    )
-    .to_lowercase()
 }
 
 fn median(times: &mut [Duration]) -> Duration {

@@ -300,13 +300,9 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     scan_split(&args.data, "train")?;
     let opened = super::open_device(args.device, log)?;
     log.info(format!(
-        "training {} ({} views of {}², width {}, {} residual blocks, {:?}) on {} into {}",
+        "training {} ({}) on {} into {}",
         args.data.display(),
-        model.views,
-        model.size,
-        model.width,
-        model.res_blocks,
-        model.channels,
+        model.describe(),
         opened.description,
         run.display()
     ));

@@ -180,9 +180,15 @@ impl ModelConfig {
     /// The shape in words, for the logs of `train` and `profile`: "4 views of 128², width 48,
     /// 2 residual blocks, xyzrgb, zero padding".
     pub fn describe(&self) -> String {
+        let count = |n: usize, one: &str| format!("{n} {one}{}", if n == 1 { "" } else { "s" });
         format!(
-            "{} views of {}², width {}, {} residual blocks, {:?}, {:?} padding",
-            self.views, self.size, self.width, self.res_blocks, self.channels, self.padding
+            "{} of {}², width {}, {}, {:?}, {:?} padding",
+            count(self.views, "view"),
+            self.size,
+            self.width,
+            count(self.res_blocks, "residual block"),
+            self.channels,
+            self.padding
         )
         .to_lowercase()
     }
@@ -312,6 +318,22 @@ impl ModelConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_shape_is_described_in_words() {
+        assert_eq!(
+            Preset::Tiny.config().describe(),
+            "4 views of 32², width 8, 1 residual block, xyzrgb, reflect padding"
+        );
+        let one_view = Preset::Paper
+            .config()
+            .with_views(1)
+            .with_channels(Channels::Xyz);
+        assert_eq!(
+            one_view.describe(),
+            "1 view of 256², width 64, 8 residual blocks, xyz, reflect padding"
+        );
+    }
 
     #[test]
     fn presets_are_valid_and_paper_matches_the_publication() {

@@ -284,6 +284,7 @@ pub struct CompleteArgs {
     /// weights, chosen on validation; one half for weights saved without one].
     #[arg(long, value_name = "P", value_parser = probability)]
     pub occupancy: Option<f64>,
+    /// Where the network runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// Rig cameras of the model's views (those it was trained with).
@@ -501,6 +502,7 @@ pub struct ProfileArgs {
     /// below override its fields.
     #[arg(long, value_enum)]
     pub config: Option<Preset>,
+    /// Where the network runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// View image side in pixels.
@@ -715,6 +717,7 @@ pub struct TrainArgs {
     /// discriminator starts fresh unless --init-discriminator names one for the new width.
     #[arg(long, requires = "init", conflicts_with = "config")]
     pub widen: Option<usize>,
+    /// Where training runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     #[arg(long, help = defaulted("Objects per micro-batch", train().batch))]
@@ -871,6 +874,7 @@ pub struct TrainOrientArgs {
     pub val_samples: usize,
     #[arg(long, default_value_t = OrientSettings::default().seed)]
     pub seed: u64,
+    /// Where training runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
     /// Memory for decoded samples, MiB; past it samples are decoded again when drawn.

@@ -10,10 +10,14 @@ use thiserror::Error;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DeviceChoice {
+    /// The CPU, on every core.
     Cpu,
     /// The fastest GPU backend that answers (CUDA, then wgpu), else the CPU with a warning.
     Gpu,
+    /// An NVIDIA GPU through CUDA (a build with the `cuda` feature), else an error.
     Cuda,
+    /// A GPU through wgpu: Vulkan, Metal or DirectX 12 (a build with the `wgpu` feature), else an
+    /// error.
     Wgpu,
 }
 

@@ -514,10 +514,13 @@ pub struct ProfileArgs {
     /// Residual blocks in the encoder.
     #[arg(long)]
     pub res_blocks: Option<usize>,
+    /// Views per object.
     #[arg(long)]
     pub views: Option<usize>,
+    /// Image channels the model reads and writes.
     #[arg(long, value_enum)]
     pub channels: Option<Channels>,
+    /// How the convolutions see past the image border.
     #[arg(long, value_enum)]
     pub padding: Option<Padding>,
     /// Objects per forward pass (per training step with --train).
@@ -602,6 +605,7 @@ pub struct PrepareArgs {
     /// Fewest points a partial is aimed at (drawn log-uniformly up to --max-points).
     #[arg(long, default_value_t = PartialParams::default().min_points)]
     pub min_points: usize,
+    /// Most points a partial is aimed at.
     #[arg(long, default_value_t = PartialParams::default().max_points)]
     pub max_points: usize,
     /// Largest angle (degrees) between the simulated scanner's path and the object's axis.
@@ -858,10 +862,13 @@ pub struct TrainOrientArgs {
     /// runs/orient-DATA, DATA the data directory's name].
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Training steps.
     #[arg(long, default_value_t = OrientSettings::default().steps)]
     pub steps: u64,
+    /// Clouds per step.
     #[arg(long, default_value_t = OrientSettings::default().batch)]
     pub batch: usize,
+    /// Adam's learning rate.
     #[arg(long, default_value_t = OrientSettings::default().learning_rate)]
     pub lr: f64,
     /// Points the network reads from a cloud.
@@ -870,8 +877,10 @@ pub struct TrainOrientArgs {
     /// Steps between validations.
     #[arg(long, default_value_t = OrientSettings::default().val_every)]
     pub val_every: u64,
+    /// Validation clouds, each turned by a fixed random yaw.
     #[arg(long, default_value_t = OrientSettings::default().val_samples)]
     pub val_samples: usize,
+    /// Seed of the samples, yaws, points and noise drawn for training and validation.
     #[arg(long, default_value_t = OrientSettings::default().seed)]
     pub seed: u64,
     /// Where training runs (GPUs: docs/gpu.md).

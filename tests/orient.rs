@@ -287,6 +287,27 @@ fn tiny_data(dir: &TempDir) -> PathBuf {
     data
 }
 
+/// `--seed` fixes the whole run, the network's first weights included (they were drawn afresh
+/// by every run before).
+#[test]
+fn train_orient_repeats_a_run_with_its_seed() {
+    let dir = TempDir::new().unwrap();
+    let data = tiny_data(&dir);
+    let log = |name: &str, seed: &str| {
+        let run = dir.path().join(name);
+        mvpcc()
+            .args(["train-orient", "--data", s(&data), "--out", s(&run)])
+            .args(["--steps", "2", "--batch", "2", "--points", "64"])
+            .args(["--val-every", "2", "--seed", seed])
+            .assert()
+            .success();
+        std::fs::read_to_string(run.join("log.jsonl")).unwrap()
+    };
+    let first = log("a", "5");
+    assert_eq!(first, log("b", "5"));
+    assert_ne!(first, log("c", "6"));
+}
+
 #[test]
 fn train_orient_writes_weights_that_complete_reads() {
     let dir = TempDir::new().unwrap();

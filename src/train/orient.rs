@@ -189,6 +189,8 @@ pub fn train_orienter(
     }
 
     let autodiff = device.clone().autodiff();
+    // The weights' initial draw too, so that a seed repeats a run.
+    autodiff.seed(settings.seed);
     let mut net = OrienterNet::new(config, &autodiff);
     let mut optim = AdamConfig::new().init();
     let n = config.points;

@@ -99,7 +99,8 @@ pub struct Options {
     pub erode: usize,
     /// Median window side over the inpainted views' XYZ.
     pub smooth: usize,
-    /// Move each inpainted pixel's XYZ onto its pixel's ray (see [`snap_to_rays`]).
+    /// Move each inpainted pixel's XYZ onto its pixel's ray (see
+    /// [`snap_to_rays`](crate::views::reprojection::snap_to_rays)).
     pub snap: bool,
     pub sor: SorParams,
     /// Keep the measured points and add completed points where they are missing; otherwise

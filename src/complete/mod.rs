@@ -192,7 +192,7 @@ impl Default for Options {
 
 #[derive(Debug, Error)]
 pub enum CompleteError {
-    #[error("only {0} points; completion needs at least {MIN_POINTS}")]
+    #[error("too few points to complete: {0}, at least {MIN_POINTS} needed")]
     TooFewPoints(usize),
     #[error(transparent)]
     Frame(#[from] FrameError),

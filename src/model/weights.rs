@@ -56,13 +56,19 @@ impl Network {
     }
 }
 
+/// "a generator", "an orienter": a network's name as the error says it.
+fn with_article(name: &str) -> String {
+    let vowel = name.starts_with(['a', 'e', 'i', 'o', 'u']);
+    format!("{} {name}", if vowel { "an" } else { "a" })
+}
+
 #[derive(Debug, Error)]
 pub enum WeightsError {
     #[error("not a safetensors file ({0})")]
     NotSafetensors(&'static str),
     #[error("not an mvpcc weights file (no {KEY_KIND} in the safetensors metadata)")]
     NotMvpcc,
-    #[error("holds a {found}, not a {expected}")]
+    #[error("holds {}, not {}", with_article(.found), with_article(.expected))]
     WrongNetwork {
         expected: &'static str,
         found: String,
@@ -440,7 +446,10 @@ mod tests {
 
         let d = config.init_discriminator(&device).unwrap();
         let disc = discriminator_to_bytes(&d, &config).unwrap();
-        assert!(matches!(err(&disc), WeightsError::WrongNetwork { .. }));
+        let wrong = err(&disc);
+        assert!(matches!(wrong, WeightsError::WrongNetwork { .. }));
+        assert_eq!(wrong.to_string(), "holds a discriminator, not a generator");
+        assert_eq!(with_article("orienter"), "an orienter");
 
         // Same tensor names, other shapes: the declared config is tampered with.
         let wider = serde_json::to_string(&config.clone().with_width(16)).unwrap();

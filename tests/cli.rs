@@ -1354,6 +1354,21 @@ fn negative_values_are_answered_by_the_options_checks() {
         "thresholds must be positive numbers",
         &out,
     );
+    // Not negative, but the same check's neighbour: a threshold twice made two alike columns.
+    fails(
+        &[
+            "eval",
+            "--pred",
+            cloud,
+            "--gt",
+            cloud,
+            "--tau",
+            "0.01,0.02,0.01",
+        ],
+        "--tau",
+        "0.01 given twice",
+        &out,
+    );
     for (command, option, problem) in [
         ("filter", "--sor-std", "-1 is not a number of 0 or more"),
         (

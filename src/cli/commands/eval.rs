@@ -549,6 +549,14 @@ fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
     if let Some(t) = args.tau.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
         bail!("--tau {t}: thresholds must be positive numbers");
     }
+    if let Some((_, t)) = args
+        .tau
+        .iter()
+        .enumerate()
+        .find(|(i, t)| args.tau[..*i].contains(t))
+    {
+        bail!("--tau: {t} given twice");
+    }
     Ok((geometry, color))
 }
 

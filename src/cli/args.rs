@@ -3,7 +3,7 @@
 
 use clap::builder::RangedU64ValueParser;
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
-use mvpcc::complete::filter::SorParams;
+use mvpcc::complete::filter::{SorParams, MAX_K};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
 use mvpcc::complete::{Method, Options, Roll, DEFAULT_MODEL};
@@ -114,8 +114,8 @@ pub struct OutputOptions {
 #[derive(Debug, Args)]
 pub struct SorOptions {
     /// Neighbours per point for the outlier filter, excluding the point itself (PCL's mean_k;
-    /// Open3D's nb_neighbors is this + 1). 0 turns the filter off.
-    #[arg(long, default_value_t = SorParams::DEFAULT.k)]
+    /// Open3D's nb_neighbors is this + 1), at most 1000. 0 turns the filter off.
+    #[arg(long, default_value_t = SorParams::DEFAULT.k, value_parser = counts(0, MAX_K))]
     pub sor_k: usize,
     /// Points whose mean neighbour distance exceeds mean + this × std are removed.
     #[arg(long, default_value_t = SorParams::DEFAULT.std_mul, value_parser = non_negative)]

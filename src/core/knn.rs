@@ -9,6 +9,7 @@ use crate::core::cloud::Aabb;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZero;
+use std::sync::OnceLock;
 
 /// A k-d tree over a fixed set of points.
 pub struct KnnIndex {
@@ -269,80 +270,115 @@ impl Grid {
 /// `out[q * k..(q + 1) * k]` (NaN where there are fewer than `k` points). Exact: the same
 /// values as a brute-force search.
 pub fn knn_distances(points: &[[f64; 3]], queries: &[[f64; 3]], k: usize) -> Vec<f64> {
-    if k == 0 || points.is_empty() {
-        return vec![f64::NAN; queries.len() * k];
-    }
-    let grid = if points.len() >= MIN_GRID_POINTS && k < points.len() {
-        // About k/2 points per cell puts ~1.5k within one cell size of a query on a surface,
-        // so the k nearest nearly always lie inside the block.
-        Grid::build(points, (0.5 * (k + 1) as f64).max(2.0))
-    } else {
-        None
-    };
-    let Some(grid) = grid else {
-        return KnnIndex::new(points).k_nearest_distances(queries, k);
-    };
-    // Queries grouped by cell: each group shares one block of candidates.
-    let mut order: Vec<(u32, u32)> = queries
-        .iter()
-        .enumerate()
-        .map(|(i, q)| {
-            (
-                grid.cell_coords(q)
-                    .map_or(u32::MAX, |c| grid.index(c) as u32),
-                i as u32,
-            )
-        })
-        .collect();
-    order.sort_unstable();
-    let groups: Vec<&[(u32, u32)]> = order.chunk_by(|a, b| a.0 == b.0).collect();
-    // Results in query-sorted order, one disjoint slice per group, so the parallel pass writes
-    // straight into one buffer; a slot left NaN is a query the block could not settle (the grid
-    // is only used when there are at least k points, so NaN means nothing else).
-    let mut by_order = vec![f64::NAN; queries.len() * k];
-    let mut slices = Vec::with_capacity(groups.len());
-    let mut rest = by_order.as_mut_slice();
-    for group in &groups {
-        let (head, tail) = rest.split_at_mut(group.len() * k);
-        slices.push(head);
-        rest = tail;
-    }
-    groups
-        .par_iter()
-        .zip(slices.into_par_iter())
-        .with_min_len(16)
-        .for_each_init(Scratch::default, |scratch, (group, found)| {
-            let Some(c) = (group[0].0 != u32::MAX)
-                .then(|| grid.cell_coords(&queries[group[0].1 as usize]))
-                .flatten()
-            else {
-                return;
-            };
-            grid.load_block(c, scratch);
-            for (j, &(_, i)) in group.iter().enumerate() {
-                let q = &queries[i as usize];
-                grid.block_knn(q, c, k, scratch, &mut found[j * k..(j + 1) * k]);
-            }
-        });
-    let mut out = vec![f64::NAN; queries.len() * k];
-    let mut missed = Vec::new();
-    for (j, &(_, i)) in order.iter().enumerate() {
-        let (i, found) = (i as usize, &by_order[j * k..(j + 1) * k]);
-        if found[0].is_nan() {
-            missed.push(i);
+    KnnSearch::new(points, k).distances(queries)
+}
+
+/// [`knn_distances`] from one set of points for any number of sets of queries: the grid (and,
+/// where the grid cannot settle a query, the k-d tree) is built once, so that queries can go in
+/// blocks whose distances fit in memory.
+pub struct KnnSearch<'a> {
+    points: &'a [[f64; 3]],
+    k: usize,
+    grid: Option<Grid>,
+    tree: OnceLock<KnnIndex>,
+}
+
+impl<'a> KnnSearch<'a> {
+    pub fn new(points: &'a [[f64; 3]], k: usize) -> KnnSearch<'a> {
+        let grid = if k > 0 && points.len() >= MIN_GRID_POINTS && k < points.len() {
+            // About k/2 points per cell puts ~1.5k within one cell size of a query on a
+            // surface, so the k nearest nearly always lie inside the block.
+            Grid::build(points, (0.5 * (k + 1) as f64).max(2.0))
         } else {
-            out[i * k..(i + 1) * k].copy_from_slice(found);
+            None
+        };
+        KnnSearch {
+            points,
+            k,
+            grid,
+            tree: OnceLock::new(),
         }
     }
-    if !missed.is_empty() {
-        let index = KnnIndex::new(points);
-        let qs: Vec<[f64; 3]> = missed.iter().map(|&i| queries[i]).collect();
-        let d = index.k_nearest_distances(&qs, k);
-        for (j, &i) in missed.iter().enumerate() {
-            out[i * k..(i + 1) * k].copy_from_slice(&d[j * k..(j + 1) * k]);
-        }
+
+    fn tree(&self) -> &KnnIndex {
+        self.tree.get_or_init(|| KnnIndex::new(self.points))
     }
-    out
+
+    /// As [`knn_distances`] for these `queries`.
+    pub fn distances(&self, queries: &[[f64; 3]]) -> Vec<f64> {
+        let k = self.k;
+        if k == 0 || self.points.is_empty() {
+            return vec![f64::NAN; queries.len() * k];
+        }
+        let Some(grid) = &self.grid else {
+            return self.tree().k_nearest_distances(queries, k);
+        };
+        self.on_grid(grid, queries)
+    }
+
+    fn on_grid(&self, grid: &Grid, queries: &[[f64; 3]]) -> Vec<f64> {
+        let k = self.k;
+        // Queries grouped by cell: each group shares one block of candidates.
+        let mut order: Vec<(u32, u32)> = queries
+            .iter()
+            .enumerate()
+            .map(|(i, q)| {
+                (
+                    grid.cell_coords(q)
+                        .map_or(u32::MAX, |c| grid.index(c) as u32),
+                    i as u32,
+                )
+            })
+            .collect();
+        order.sort_unstable();
+        let groups: Vec<&[(u32, u32)]> = order.chunk_by(|a, b| a.0 == b.0).collect();
+        // Results in query-sorted order, one disjoint slice per group, so the parallel pass writes
+        // straight into one buffer; a slot left NaN is a query the block could not settle (the grid
+        // is only used when there are at least k points, so NaN means nothing else).
+        let mut by_order = vec![f64::NAN; queries.len() * k];
+        let mut slices = Vec::with_capacity(groups.len());
+        let mut rest = by_order.as_mut_slice();
+        for group in &groups {
+            let (head, tail) = rest.split_at_mut(group.len() * k);
+            slices.push(head);
+            rest = tail;
+        }
+        groups
+            .par_iter()
+            .zip(slices.into_par_iter())
+            .with_min_len(16)
+            .for_each_init(Scratch::default, |scratch, (group, found)| {
+                let Some(c) = (group[0].0 != u32::MAX)
+                    .then(|| grid.cell_coords(&queries[group[0].1 as usize]))
+                    .flatten()
+                else {
+                    return;
+                };
+                grid.load_block(c, scratch);
+                for (j, &(_, i)) in group.iter().enumerate() {
+                    let q = &queries[i as usize];
+                    grid.block_knn(q, c, k, scratch, &mut found[j * k..(j + 1) * k]);
+                }
+            });
+        let mut out = vec![f64::NAN; queries.len() * k];
+        let mut missed = Vec::new();
+        for (j, &(_, i)) in order.iter().enumerate() {
+            let (i, found) = (i as usize, &by_order[j * k..(j + 1) * k]);
+            if found[0].is_nan() {
+                missed.push(i);
+            } else {
+                out[i * k..(i + 1) * k].copy_from_slice(found);
+            }
+        }
+        if !missed.is_empty() {
+            let qs: Vec<[f64; 3]> = missed.iter().map(|&i| queries[i]).collect();
+            let d = self.tree().k_nearest_distances(&qs, k);
+            for (j, &i) in missed.iter().enumerate() {
+                out[i * k..(i + 1) * k].copy_from_slice(&d[j * k..(j + 1) * k]);
+            }
+        }
+        out
+    }
 }
 
 /// Points bucketed in cubic cells at least as large as a match distance, so "the nearest point

@@ -475,7 +475,10 @@ fn batch_completes_the_good_files_and_reports_the_bad_ones() {
         .failure()
         .stderr(predicate::str::contains("2 of 5 files failed"))
         .stderr(predicate::str::contains("broken.ply"))
-        .stderr(predicate::str::contains("few.ply").and(predicate::str::contains("20 points")))
+        .stderr(
+            predicate::str::contains("few.ply")
+                .and(predicate::str::contains("too few points to complete: 20,")),
+        )
         .stderr(predicate::str::contains("panicked").not());
     let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
     assert_eq!(report["results"].as_array().unwrap().len(), 5);

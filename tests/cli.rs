@@ -47,6 +47,17 @@ fn fails(args: &[&str], names: &str, problem: &str, output: &Path) {
     assert!(!output.exists(), "{} must not be written", output.display());
 }
 
+/// `args` refused by the argument parser (exit status 2) with a message holding `says`, and
+/// `output` not written.
+fn refused_by_parser(args: &[&str], says: &str, output: &Path) {
+    mvpcc()
+        .args(args)
+        .assert()
+        .code(2)
+        .stderr(predicate::str::contains(says));
+    assert!(!output.exists(), "{} must not be written", output.display());
+}
+
 /// Runs `mvpcc eval … --json` and parses what it prints.
 fn eval_json(args: &[&str]) -> serde_json::Value {
     json_of_success(mvpcc().arg("eval").args(args).arg("--json"))
@@ -278,14 +289,11 @@ fn project_then_reproject_returns_to_the_input_frame() {
 
     // A NaN tolerance turned de-duplication off without a word.
     let refused = dir.path().join("refused.ply");
-    mvpcc()
-        .args(["reproject", s(&views), s(&refused), "--dedup", "nan"])
-        .assert()
-        .code(2)
-        .stderr(predicate::str::contains(
-            "nan is not a distance of 0 or more",
-        ));
-    assert!(!refused.exists());
+    refused_by_parser(
+        &["reproject", s(&views), s(&refused), "--dedup", "nan"],
+        "nan is not a distance of 0 or more",
+        &refused,
+    );
 }
 
 #[test]
@@ -1348,14 +1356,11 @@ fn an_outlier_filter_of_too_many_neighbours_is_refused() {
     let cloud = write(&dir, "car.ply", &car());
     let out = dir.path().join("out.ply");
     for command in ["filter", "complete"] {
-        mvpcc()
-            .args([command, s(&cloud), s(&out), "--sor-k", "100000"])
-            .assert()
-            .failure()
-            .stderr(predicate::str::contains(
-                "invalid value '100000' for '--sor-k <SOR_K>': 100000 is not in 0..=1000",
-            ));
-        assert!(!out.exists());
+        refused_by_parser(
+            &[command, s(&cloud), s(&out), "--sor-k", "100000"],
+            "invalid value '100000' for '--sor-k <SOR_K>': 100000 is not in 0..=1000",
+            &out,
+        );
     }
 }
 
@@ -1397,12 +1402,7 @@ fn negative_values_are_answered_by_the_options_checks() {
             "-1 is not a distance of 0 or more",
         ),
     ] {
-        mvpcc()
-            .args([command, cloud, to, option, "-1"])
-            .assert()
-            .code(2)
-            .stderr(predicate::str::contains(problem));
-        assert!(!out.exists());
+        refused_by_parser(&[command, cloud, to, option, "-1"], problem, &out);
     }
     mvpcc()
         .args([

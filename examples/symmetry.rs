@@ -59,6 +59,9 @@ struct Sample {
     /// Where the estimated plane crosses the object's centre line, over its length, positive
     /// towards the scanned side (scanner partials; the cameras' side is not one side).
     towards_scanner: Option<f64>,
+    /// The same, positive towards the side of the true plane holding more of the measured
+    /// points (every partial).
+    towards_seen: Option<f64>,
     /// How the plane was found (`PlaneFit`), `None` when it was not.
     fit: Option<String>,
     /// F1@0.01 of the partial alone, of the mirror completion and of the mirror about the
@@ -120,7 +123,8 @@ fn measure(
     let measured = spec.points_to_object_frame(&cloud.positions);
     let completed = spec.points_to_object_frame(&completion.cloud.positions);
     let length = bounds.longest_side();
-    let (offset, angle, towards_scanner) = match completion.plane {
+    let seen_side = measured.iter().map(|p| p[0]).sum::<f64>().signum();
+    let (offset, angle, towards_scanner, towards_seen) = match completion.plane {
         Some(plane) => {
             let frame = &completion.frame;
             let [on, ahead] = [plane.offset, plane.offset + 1.0]
@@ -141,9 +145,10 @@ fn measure(
                 Some(distance.abs() / length),
                 Some(angle),
                 side.map(|s| s * x / length),
+                Some(seen_side * x / length),
             )
         }
-        None => (None, None, None),
+        None => (None, None, None, None),
     };
     let tolerance = completion
         .plane
@@ -155,6 +160,7 @@ fn measure(
         offset,
         angle,
         towards_scanner,
+        towards_seen,
         fit: completion.plane.map(|p| format!("{:?}", p.fit)),
         f1_partial: f1(&measured, gt),
         f1_mirror: f1(&completed, gt),

@@ -242,6 +242,39 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
 }
 
 #[test]
+fn a_fresh_run_takes_the_built_in_models_shape_unless_told_otherwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = |run: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap()
+    };
+    let builtin = mvpcc::complete::builtin_shape().unwrap();
+    for (name, options) in [("default", &[][..]), ("named", &["--config", "BuiltIn"][..])] {
+        let run = dir.path().join(name);
+        base(&run)
+            .args(options)
+            .args(["--steps", "0", "--val-every", "0"])
+            .assert()
+            .success();
+        let c = config(&run);
+        assert_eq!(c["width"], builtin.width, "{name}: {c}");
+        assert_eq!(c["res_blocks"], builtin.res_blocks, "{name}: {c}");
+        assert_eq!(c["size"], builtin.size, "{name}: {c}");
+        // The threshold was chosen for the built-in weights, not for fresh ones.
+        assert!(c["occupancy"].is_null(), "{name}: {c}");
+    }
+    let cpu = dir.path().join("cpu");
+    base(&cpu)
+        .args(["--config", "cpu", "--steps", "0", "--val-every", "0"])
+        .assert()
+        .success();
+    assert_eq!(config(&cpu)["res_blocks"], 6);
+    refused_saying(
+        base(&dir.path().join("none")).args(["--config", "huge", "--steps", "0"]),
+        "--config huge: neither builtin, a preset",
+    );
+}
+
+#[test]
 fn a_run_widens_another_runs_generator_and_starts_from_its_output() {
     let dir = tempfile::tempdir().unwrap();
     let [narrow, wide, thinner] = ["narrow", "wide", "thinner"].map(|n| dir.path().join(n));

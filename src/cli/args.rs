@@ -6,7 +6,7 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::{SorParams, MAX_K};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
-use mvpcc::complete::{Method, Options, Roll, DEFAULT_MODEL};
+use mvpcc::complete::{builtin_shape, Method, Options, Roll};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -17,7 +17,7 @@ use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
-use mvpcc::model::weights::{read_config, Network, WeightsError};
+use mvpcc::model::weights::WeightsError;
 use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
@@ -550,7 +550,7 @@ impl ProfileArgs {
     pub fn model_config(&self) -> Result<ModelConfig, WeightsError> {
         let mut c = match self.config {
             Some(preset) => preset.config(),
-            None => read_config(DEFAULT_MODEL, Network::Generator)?,
+            None => builtin_shape()?,
         };
         c.size = self.size.unwrap_or(c.size);
         c.width = self.width.unwrap_or(c.width);
@@ -686,8 +686,9 @@ pub struct TrainArgs {
     /// Image channels the model reads and writes [default: xyzrgb].
     #[arg(long, value_enum)]
     pub channels: Option<Channels>,
-    /// Model shape: a preset (cpu, paper, small, tiny) or a JSON file holding a model config
-    /// (as a run's config.json) [default: cpu].
+    /// Model shape: `builtin` (the built-in model's, with fresh weights), a preset (cpu, paper,
+    /// small, tiny) or a JSON file holding a model config (as a run's config.json) [default:
+    /// builtin].
     #[arg(long)]
     pub config: Option<String>,
     /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).

@@ -28,7 +28,8 @@ use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
 use crate::core::knn::{KnnIndex, MatchGrid};
 use crate::model::inpaint::{InpaintError, Inpainter};
-use crate::model::weights::WeightsError;
+use crate::model::weights::{read_config, Network, WeightsError};
+use crate::model::ModelConfig;
 use crate::views::projection::ViewImages;
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
@@ -43,6 +44,16 @@ pub const MIN_POINTS: usize = 50;
 const SPARSE_POINTS: usize = 500;
 /// The built-in generator (see README, *The default model*, for how it was trained).
 pub const DEFAULT_MODEL: &[u8] = include_bytes!("../../assets/model.safetensors");
+
+/// The built-in generator's shape, for a network trained or timed afresh: its config without
+/// the occupancy threshold, which was chosen for its weights.
+pub fn builtin_shape() -> Result<ModelConfig, WeightsError> {
+    let config = read_config(DEFAULT_MODEL, Network::Generator)?;
+    Ok(ModelConfig {
+        occupancy: None,
+        ..config
+    })
+}
 
 pub use crate::core::cloud::SYNTHETIC;
 

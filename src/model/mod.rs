@@ -109,9 +109,10 @@ pub struct ModelConfig {
 pub enum Preset {
     /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
     Paper,
-    /// `train`'s default shape, chosen by measurement (see docs/speed.md): w 56, r 6, S 128, zero
-    /// padding, the largest whose whole `complete` stayed within a second on two cores when
-    /// chosen (2026-12-01). The built-in model has a shape of its own (`mvpcc profile` times it).
+    /// w 56, r 6, S 128, zero padding: chosen by measurement (see docs/speed.md) as the largest
+    /// whose whole `complete` stayed within a second on two cores (2026-12-01), and `train`'s
+    /// default until it took the built-in model's shape (w 48, r 2, measured the same way on
+    /// 2026-12-04, docs/training.md).
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
     Small,

@@ -6,6 +6,7 @@ use crate::cli::args::TrainArgs;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use indicatif::ProgressBar;
+use mvpcc::complete::builtin_shape;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{ModelConfig, Preset};
 use mvpcc::train::dataset::scan_split;
@@ -24,13 +25,19 @@ const OPERATIONAL: [&str; 3] = ["log_every", "keep", "seen_samples"];
 
 /// `--config`: a preset's name (`cpu`, the CPU default; `paper`, `small`, `tiny`) or a JSON
 /// file holding a model config.
+/// `--config`'s name for the built-in model's shape, and its default.
+const BUILTIN: &str = "builtin";
+
 fn model_config(name: &str) -> anyhow::Result<ModelConfig> {
+    if name.eq_ignore_ascii_case(BUILTIN) {
+        return builtin_shape().context("the built-in model");
+    }
     if let Ok(preset) = Preset::from_str(name, true) {
         return Ok(preset.config());
     }
     let path = Path::new(name);
     let text = std::fs::read_to_string(path).with_context(|| {
-        format!("--config {name}: neither a preset (cpu, paper, small, tiny) nor a readable file")
+        format!("--config {name}: neither {BUILTIN}, a preset (cpu, paper, small, tiny) nor a readable file")
     })?;
     let config: ModelConfig = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a model config", path.display()))?;
@@ -199,7 +206,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
                     ..own
                 }
             }
-            (None, None) => Preset::Cpu.config(),
+            (None, None) => model_config(BUILTIN)?,
         };
         (settings, fresh_model(base))
     };

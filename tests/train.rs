@@ -248,7 +248,10 @@ fn a_fresh_run_takes_the_built_in_models_shape_unless_told_otherwise() {
         serde_json::from_str(&std::fs::read_to_string(run.join("config.json")).unwrap()).unwrap()
     };
     let builtin = mvpcc::complete::builtin_shape().unwrap();
-    for (name, options) in [("default", &[][..]), ("named", &["--config", "BuiltIn"][..])] {
+    for (name, options) in [
+        ("default", &[][..]),
+        ("named", &["--config", "BuiltIn"][..]),
+    ] {
         let run = dir.path().join(name);
         base(&run)
             .args(options)

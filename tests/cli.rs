@@ -756,6 +756,35 @@ fn profile_times_the_built_in_models_shape_by_default() {
     );
 }
 
+/// `--config` names a shape as `train`'s does: the built-in one, a preset, or a config file
+/// such as a run's config.json.
+#[test]
+fn profile_times_a_named_shape_or_a_config_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("config.json");
+    let config = mvpcc::model::Preset::Tiny.config().with_width(6);
+    std::fs::write(&file, serde_json::to_string(&config).unwrap()).unwrap();
+    let profiled = |name: &str| -> serde_json::Value {
+        let out = mvpcc()
+            .args(["profile", "--config", name, "--size", "32", "--runs", "1"])
+            .args(["--warmup", "0", "--json"])
+            .assert()
+            .success()
+            .get_output()
+            .clone();
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["config"].clone()
+    };
+    assert_eq!(profiled("builtin")["width"], 48);
+    assert_eq!(profiled(file.to_str().unwrap())["width"], 6);
+    mvpcc()
+        .args(["profile", "--config", "huge"])
+        .assert()
+        .failure()
+        .stderr(predicate::str::starts_with(
+            "error: --config huge: neither builtin, a preset",
+        ));
+}
+
 #[test]
 fn profile_train_times_whole_gan_steps_phase_by_phase() {
     let out = mvpcc()

@@ -6,7 +6,7 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::{SorParams, MAX_K};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
-use mvpcc::complete::{builtin_shape, Method, Options, Roll};
+use mvpcc::complete::{Method, Options, Roll};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -17,8 +17,7 @@ use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::loss::Adversarial;
-use mvpcc::model::weights::WeightsError;
-use mvpcc::model::{Channels, Formulation, Fusion, ModelConfig, Padding, Preset};
+use mvpcc::model::{Channels, Formulation, Fusion, Padding};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
@@ -498,10 +497,11 @@ pub struct FilterArgs {
 
 #[derive(Debug, Args)]
 pub struct ProfileArgs {
-    /// Model shape: a preset, else the built-in model's (the one `complete` runs); the options
-    /// below override its fields.
-    #[arg(long, value_enum)]
-    pub config: Option<Preset>,
+    /// Model shape: `builtin` (the one `complete` runs), a preset (cpu, paper, small, tiny) or a
+    /// JSON file holding a model config (as a run's config.json); the options below override
+    /// its fields [default: builtin].
+    #[arg(long)]
+    pub config: Option<String>,
     /// Where the network runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
@@ -543,23 +543,6 @@ pub struct ProfileArgs {
     /// Print the results as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-impl ProfileArgs {
-    /// The preset's config, or the built-in model's, with the options' overrides.
-    pub fn model_config(&self) -> Result<ModelConfig, WeightsError> {
-        let mut c = match self.config {
-            Some(preset) => preset.config(),
-            None => builtin_shape()?,
-        };
-        c.size = self.size.unwrap_or(c.size);
-        c.width = self.width.unwrap_or(c.width);
-        c.res_blocks = self.res_blocks.unwrap_or(c.res_blocks);
-        c.views = self.views.unwrap_or(c.views);
-        c.channels = self.channels.unwrap_or(c.channels);
-        c.padding = self.padding.unwrap_or(c.padding);
-        Ok(c)
-    }
 }
 
 #[derive(Debug, Args)]

@@ -3,7 +3,7 @@
 //! pick a model shape and device, and anyone can reproduce the speed figures in the README and
 //! docs/gpu.md.
 
-use super::Log;
+use super::{model_shape, Log, BUILTIN};
 use crate::cli::args::ProfileArgs;
 use anyhow::Context;
 use burn::tensor::{Device, Distribution, Tensor};
@@ -39,8 +39,22 @@ struct Part {
     ms: f64,
 }
 
+/// `config` with the fields the options set.
+fn overridden(config: ModelConfig, args: &ProfileArgs) -> ModelConfig {
+    ModelConfig {
+        size: args.size.unwrap_or(config.size),
+        width: args.width.unwrap_or(config.width),
+        res_blocks: args.res_blocks.unwrap_or(config.res_blocks),
+        views: args.views.unwrap_or(config.views),
+        channels: args.channels.unwrap_or(config.channels),
+        padding: args.padding.unwrap_or(config.padding),
+        ..config
+    }
+}
+
 pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
-    let config = args.model_config().context("the built-in model")?;
+    let name = args.config.as_deref().unwrap_or(BUILTIN);
+    let config = overridden(model_shape(name)?, &args);
     config.validate().context("model config")?;
     anyhow::ensure!(args.runs > 0, "--runs must be at least 1");
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
@@ -58,9 +72,10 @@ pub fn run(args: ProfileArgs, log: Log) -> anyhow::Result<()> {
         } else {
             "the forward"
         },
-        args.config.map_or("the built-in model".to_string(), |p| {
-            format!("the {p:?} preset").to_lowercase()
-        }),
+        match &args.config {
+            None => "the built-in model".to_string(),
+            Some(name) => format!("--config {name}"),
+        },
         opened.description,
         config.describe(),
         args.batch,

@@ -1,14 +1,12 @@
 //! `mvpcc train`: options → settings (or a run's saved settings on `--resume`), the device,
 //! Ctrl-C, and a progress bar over the training loop.
 
-use super::Log;
+use super::{model_shape, Log, BUILTIN};
 use crate::cli::args::TrainArgs;
 use anyhow::{bail, Context};
-use clap::ValueEnum;
 use indicatif::ProgressBar;
-use mvpcc::complete::builtin_shape;
 use mvpcc::model::gan::StepLosses;
-use mvpcc::model::{ModelConfig, Preset};
+use mvpcc::model::ModelConfig;
 use mvpcc::train::dataset::scan_split;
 use mvpcc::train::{
     train, InitWeights, Job, LogRecord, Monitor, Outcome, Summary, TrainSettings, CONFIG_FILE,
@@ -22,27 +20,6 @@ use std::sync::Arc;
 /// Settings a resumed run may change: they decide how the run is carried out and reported, not
 /// what it computes (the training samples scored beside the validation decide nothing).
 const OPERATIONAL: [&str; 3] = ["log_every", "keep", "seen_samples"];
-
-/// `--config`: a preset's name (`cpu`, the CPU default; `paper`, `small`, `tiny`) or a JSON
-/// file holding a model config.
-/// `--config`'s name for the built-in model's shape, and its default.
-const BUILTIN: &str = "builtin";
-
-fn model_config(name: &str) -> anyhow::Result<ModelConfig> {
-    if name.eq_ignore_ascii_case(BUILTIN) {
-        return builtin_shape().context("the built-in model");
-    }
-    if let Ok(preset) = Preset::from_str(name, true) {
-        return Ok(preset.config());
-    }
-    let path = Path::new(name);
-    let text = std::fs::read_to_string(path).with_context(|| {
-        format!("--config {name}: neither {BUILTIN}, a preset (cpu, paper, small, tiny) nor a readable file")
-    })?;
-    let config: ModelConfig = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a model config", path.display()))?;
-    Ok(config)
-}
 
 fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
     let text = std::fs::read_to_string(path)
@@ -180,7 +157,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             );
         }
         let model = match &args.config {
-            Some(name) => fresh_model(model_config(name)?),
+            Some(name) => fresh_model(model_shape(name)?),
             None => fresh_model(saved_model.clone()),
         }
         .with_views(saved_model.views);
@@ -198,7 +175,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             })
             .transpose()?;
         let base = match (&args.config, &settings.init) {
-            (Some(name), _) => model_config(name)?,
+            (Some(name), _) => model_shape(name)?,
             (None, Some(init)) => {
                 let own = init.config()?;
                 ModelConfig {
@@ -206,7 +183,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
                     ..own
                 }
             }
-            (None, None) => model_config(BUILTIN)?,
+            (None, None) => model_shape(BUILTIN)?,
         };
         (settings, fresh_model(base))
     };

@@ -112,9 +112,15 @@ pub struct OutputOptions {
 
 #[derive(Debug, Args)]
 pub struct SorOptions {
-    /// Neighbours per point for the outlier filter, excluding the point itself (PCL's mean_k;
-    /// Open3D's nb_neighbors is this + 1), at most 1000. 0 turns the filter off.
-    #[arg(long, default_value_t = SorParams::DEFAULT.k, value_parser = counts(0, MAX_K))]
+    #[arg(
+        long,
+        default_value_t = SorParams::DEFAULT.k,
+        value_parser = counts(0, MAX_K),
+        help = format!(
+            "Neighbours per point for the outlier filter, excluding the point itself (PCL's \
+             mean_k; Open3D's nb_neighbors is this + 1), at most {MAX_K}. 0 turns the filter off"
+        )
+    )]
     pub sor_k: usize,
     /// Points whose mean neighbour distance exceeds mean + this × std are removed.
     #[arg(long, default_value_t = SorParams::DEFAULT.std_mul, value_parser = non_negative)]

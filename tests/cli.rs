@@ -1393,6 +1393,29 @@ fn an_outlier_filter_of_too_many_neighbours_is_refused() {
     }
 }
 
+/// `--erode 2` eroded as `--erode 3` and `--erode 4` as 5 without a word (a window centres on its
+/// pixel), and `--smooth 1000` took seconds to leave one point a view.
+#[test]
+fn window_sides_are_odd_and_bounded() {
+    let dir = TempDir::new().unwrap();
+    let cloud = write(&dir, "car.ply", &car());
+    let out = dir.path().join("out.ply");
+    for command in ["complete", "reproject"] {
+        for (option, value, problem) in [
+            (
+                "--erode",
+                "2",
+                "2 is even; a window centred on its pixel has an odd side",
+            ),
+            ("--smooth", "4", "4 is even"),
+            ("--smooth", "33", "33 is wider than 31 pixels"),
+            ("--erode", "x", "x is not a window side in pixels"),
+        ] {
+            refused_by_parser(&[command, s(&cloud), s(&out), option, value], problem, &out);
+        }
+    }
+}
+
 /// A threshold given twice made two alike columns (and two alike `--json` entries).
 #[test]
 fn a_threshold_given_twice_is_refused() {

@@ -21,7 +21,7 @@ use mvpcc::model::{Channels, Formulation, Fusion, Padding};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
-use mvpcc::views::reprojection::ReprojectOptions;
+use mvpcc::views::reprojection::{ReprojectOptions, MAX_WINDOW};
 use std::path::PathBuf;
 
 #[derive(Debug, Parser)]
@@ -361,13 +361,13 @@ pub struct CompleteArgs {
         conflicts_with = "paper"
     )]
     pub vehicle_width: Option<f64>,
-    /// Erosion element side for the inpainted views (pixels); 0 = off. A model that keeps its
-    /// input's pixels (the built-in one) has them spared.
-    #[arg(long, default_value_t = Options::default().erode)]
+    /// Erosion element side for the inpainted views (pixels, odd); 0 = off. A model that keeps
+    /// its input's pixels (the built-in one) has them spared.
+    #[arg(long, default_value_t = Options::default().erode, value_parser = window_side)]
     pub erode: usize,
-    /// Median window side over each inpainted view's XYZ before re-projection; 0 = off. A
-    /// model that keeps its input's pixels (the built-in one) has them spared.
-    #[arg(long, default_value_t = Options::default().smooth)]
+    /// Median window side over each inpainted view's XYZ before re-projection (pixels, odd);
+    /// 0 = off. A model that keeps its input's pixels (the built-in one) has them spared.
+    #[arg(long, default_value_t = Options::default().smooth, value_parser = window_side)]
     pub smooth: usize,
     /// Keep the network's XYZ as it predicts them, instead of moving each onto its pixel's ray
     /// at the predicted depth (a model that keeps its input's pixels leaves those where they
@@ -468,12 +468,12 @@ pub struct ReprojectArgs {
     /// Rig cameras to use [default: every locations_NNN.png found].
     #[arg(long)]
     pub views: Option<ViewList>,
-    /// Erosion element side in pixels before re-projection; 0 = off. Meant for dense
+    /// Erosion element side in pixels (odd) before re-projection; 0 = off. Meant for dense
     /// (inpainted) views: it removes most of a raw sparse scan.
-    #[arg(long, default_value_t = ReprojectOptions::default().erode)]
+    #[arg(long, default_value_t = ReprojectOptions::default().erode, value_parser = window_side)]
     pub erode: usize,
-    /// Median window side over each view's XYZ before re-projection (pixels); 0 = off.
-    #[arg(long, default_value_t = ReprojectOptions::default().smooth)]
+    /// Median window side over each view's XYZ before re-projection (pixels, odd); 0 = off.
+    #[arg(long, default_value_t = ReprojectOptions::default().smooth, value_parser = window_side)]
     pub smooth: usize,
     /// Points closer than this (normalized units) to an earlier point are dropped; 0 = off.
     #[arg(long, default_value_t = ReprojectOptions::default().dedup_tolerance, value_parser = distance)]
@@ -900,6 +900,19 @@ fn non_negative(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(x) if x >= 0.0 => Ok(x),
         _ => Err(format!("{text} is not a number of 0 or more")),
+    }
+}
+
+/// An erosion element's or median window's side: 0 (off) or odd, so that it centres on its
+/// pixel (an even side was silently taken as the next odd one), at most [`MAX_WINDOW`].
+fn window_side(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(k) if k > MAX_WINDOW => Err(format!("{k} is wider than {MAX_WINDOW} pixels")),
+        Ok(k) if k > 0 && k % 2 == 0 => Err(format!(
+            "{k} is even; a window centred on its pixel has an odd side (0 turns it off)"
+        )),
+        Ok(k) => Ok(k),
+        Err(_) => Err(format!("{text} is not a window side in pixels")),
     }
 }
 

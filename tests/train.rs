@@ -397,6 +397,18 @@ fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_ru
     assert!(!depth.is_empty() && depth.iter().all(|d| *d > 0.0), "{log}");
     assert_eq!(loss["adversarial_kind"], "non-saturating");
     assert_eq!(settings["tv_from_stage"], 1);
+
+    // A negative weight trained away from the target without a word, a NaN one (or jitter) until
+    // the losses went NaN.
+    for (option, value, said) in [
+        ("--loss-l1", "-1", "loss weight l1 -1"),
+        ("--loss-tv", "nan", "loss weight tv NaN"),
+        ("--color-jitter", "nan", "colour jitter NaN"),
+    ] {
+        let refused = dir.path().join("refused");
+        refused_saying(&mut train(&refused, 1, &[option, value]), said);
+        assert!(!refused.exists(), "{option} {value}");
+    }
 }
 
 #[test]

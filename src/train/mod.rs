@@ -266,10 +266,40 @@ impl TrainSettings {
             "at least one view is needed"
         } else if self.tv_from_stage == 0 {
             "stages are counted from 1"
+        } else if let Some(problem) = self.unusable_weight_or_augmentation() {
+            return Err(SettingsError(problem));
         } else {
             return Ok(());
         };
         Err(SettingsError(problem.to_string()))
+    }
+
+    /// A loss weight or augmentation amplitude that is negative or not a number: a negative
+    /// weight trains the network away from its target, and a NaN weight or jitter gave no word
+    /// until the losses went NaN a step later (or never, for a term not yet in use).
+    fn unusable_weight_or_augmentation(&self) -> Option<String> {
+        let l = &self.loss;
+        let weights = [
+            ("l1", l.l1),
+            ("adversarial", l.adversarial),
+            ("perceptual", l.perceptual),
+            ("style", l.style),
+            ("bce", l.occupancy),
+            ("tv", l.tv),
+            ("depth", l.depth),
+        ];
+        let amplitudes = [
+            ("max yaw", self.augment.max_yaw_deg as f64),
+            ("colour jitter", self.augment.color_jitter as f64),
+        ];
+        let bad = |x: f64| !(x.is_finite() && x >= 0.0);
+        if let Some((name, w)) = weights.iter().find(|(_, w)| bad(*w)) {
+            return Some(format!(
+                "loss weight {name} {w}: a number of 0 or more expected"
+            ));
+        }
+        let (name, a) = amplitudes.iter().find(|(_, a)| bad(*a))?;
+        Some(format!("{name} {a}: a number of 0 or more expected"))
     }
 
     /// The generator's learning rate for the step after `step` in `stage`.
@@ -788,7 +818,11 @@ mod tests {
     #[test]
     fn default_settings_are_valid_and_broken_ones_are_refused() {
         assert!(TrainSettings::default().validate().is_ok());
-        let broken: [fn(&mut TrainSettings); 8] = [
+        let broken: [fn(&mut TrainSettings); 12] = [
+            |s| s.loss.l1 = -1.0,
+            |s| s.loss.tv = f64::NAN,
+            |s| s.augment.max_yaw_deg = f32::NAN,
+            |s| s.augment.color_jitter = -0.1,
             |s| s.batch = 0,
             |s| s.batch = crate::model::MAX_BATCH + 1,
             |s| s.accumulate = 0,

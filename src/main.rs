@@ -10,7 +10,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", cli::one_line(&e));
+            cli::streams::tell(format_args!("error: {}", cli::one_line(&e)));
             ExitCode::FAILURE
         }
     }

@@ -138,6 +138,34 @@ fn eval_reproduces_the_reference_fixture() {
         );
 }
 
+/// `mvpcc eval … | head -1` panicked ("failed printing to stdout: Broken pipe") once its reader
+/// had gone. More results than a pipe's 64 KiB make the writer meet the closed pipe however the
+/// two processes are scheduled.
+#[test]
+fn a_reader_that_goes_away_ends_the_results_quietly() {
+    let dir = TempDir::new().unwrap();
+    let (pred, gt) = (dir.path().join("pred"), dir.path().join("gt"));
+    let line = PointCloud::from_positions((0..20).map(|i| [i as f64 * 0.01, 0.0, 0.0]).collect());
+    for folder in [&pred, &gt] {
+        std::fs::create_dir(folder).unwrap();
+        for i in 0..200 {
+            let path = folder.join(format!("c{i:03}.ply"));
+            write_cloud(&path, &line, None, Encoding::Binary).unwrap();
+        }
+    }
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("mvpcc"))
+        .args(["eval", "--pred-dir", s(&pred), "--gt-dir", s(&gt), "--json"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let done = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert!(done.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
 #[test]
 fn eval_over_directories_matches_by_path_without_extension() {
     let dir = TempDir::new().unwrap();

@@ -3,6 +3,7 @@
 
 pub mod args;
 pub mod commands;
+pub mod streams;
 
 /// The error and its causes joined by ": " on one line. A cause whose text an outer error
 /// already quotes (as `"{path}: {source}"` messages do) is not repeated.

@@ -1,6 +1,7 @@
 use super::project::default_up;
 use super::{non_finite_warning, progress, Log};
 use crate::cli::args::CompleteArgs;
+use crate::cli::streams::{say, tell};
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
 use mvpcc::complete::clean::CleanReport;
@@ -50,7 +51,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
             let views = args.save_views.clone();
             let report = complete_file(input, output, views, &args, &completer, log)?;
             if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                say(serde_json::to_string_pretty(&report)?)?;
             }
             Ok(())
         }
@@ -288,7 +289,7 @@ fn complete_file(
     log.info(summary(output, &run, &timings));
     if args.timings && !args.json {
         for (name, d) in timings.stages() {
-            eprintln!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3);
+            tell(format_args!("{name:>14} {:9.1} ms", d.as_secs_f64() * 1e3));
         }
     }
     Ok(report(input, output, args, run, &timings))
@@ -637,7 +638,7 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
         report.failed
     ));
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        say(serde_json::to_string_pretty(&report)?)?;
     }
     if report.failed > 0 {
         bail!("{} of {} files failed", report.failed, report.files);
@@ -659,7 +660,7 @@ fn summarize(args: &CompleteArgs, results: Vec<BatchEntry>, log: Log) -> BatchRe
             BatchEntry::Skipped { .. } => skipped += 1,
             BatchEntry::Failed { error, .. } => {
                 failed += 1;
-                eprintln!("failed: {error}");
+                tell(format_args!("failed: {error}"));
             }
         }
     }

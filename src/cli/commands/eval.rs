@@ -1,5 +1,6 @@
 use super::{load, Log};
 use crate::cli::args::{EvalArgs, GroundTruth, Metric, Normalize};
+use crate::cli::streams::say;
 use anyhow::{bail, Context};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
@@ -656,10 +657,10 @@ fn eval_view_dirs(
 /// The results on stdout: the report as JSON with `--json`, the table otherwise.
 fn print_results(json: bool, report: &impl Serialize, table: &Table) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(report)?);
+        say(serde_json::to_string_pretty(report)?)?;
     } else {
         for line in &table.lines {
-            println!("{line}");
+            say(line)?;
         }
     }
     Ok(())

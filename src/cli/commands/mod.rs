@@ -12,6 +12,7 @@ mod train;
 mod train_orient;
 
 use crate::cli::args::{Cli, Command};
+use crate::cli::streams::tell;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
 use mvpcc::complete::builtin_shape;
@@ -80,13 +81,13 @@ impl Log {
 
     pub fn info(&self, message: impl Display) {
         if !self.quiet {
-            eprintln!("{message}");
+            tell(message);
         }
     }
 
     pub fn warn(&self, message: impl Display) {
         if !self.silent {
-            eprintln!("warning: {message}");
+            tell(format_args!("warning: {message}"));
         }
     }
 

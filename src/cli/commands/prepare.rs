@@ -1,5 +1,6 @@
 use super::{synth, Log};
 use crate::cli::args::PrepareArgs;
+use crate::cli::streams::say;
 use anyhow::{bail, Context};
 use mvpcc::core::camera::{check_view_set, MAX_IMAGE_SIZE, MIN_IMAGE_SIZE};
 use mvpcc::datagen::data::{
@@ -315,7 +316,7 @@ pub(super) fn run(args: PrepareArgs, log: Log) -> anyhow::Result<()> {
     )?;
     log.info(summary_line(&summary, run.new));
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        say(serde_json::to_string_pretty(&summary)?)?;
     }
     if summary.models == 0 && args.shard.is_none() {
         bail!("{}: none of the meshes could be used", meshes.display());

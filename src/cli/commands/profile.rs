@@ -5,6 +5,7 @@
 
 use super::{model_shape, Log, BUILTIN};
 use crate::cli::args::ProfileArgs;
+use crate::cli::streams::say;
 use anyhow::Context;
 use burn::tensor::{Device, Distribution, Tensor};
 use mvpcc::model::gan::{Batch, Gan, GanOptimConfig, StepClock, StepPhase};
@@ -184,7 +185,7 @@ fn measure<K: Ord + Copy + Named>(
 
 fn print(report: &Report, json: bool) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(report)?);
+        say(serde_json::to_string_pretty(report)?)?;
         return Ok(());
     }
     let part = if report.measured == "forward" {
@@ -193,26 +194,28 @@ fn print(report: &Report, json: bool) -> anyhow::Result<()> {
         "step phase"
     };
     let summed: f64 = report.breakdown.iter().map(|p| p.ms).sum();
-    println!("{part:<30} {:>10} {:>7}", "ms", "share");
+    say(format_args!("{part:<30} {:>10} {:>7}", "ms", "share"))?;
     for Part { name, ms } in &report.breakdown {
-        println!(
+        say(format_args!(
             "{name:<30} {ms:>10.1} {:>6.1}%",
             100.0 * ms / summed.max(f64::MIN_POSITIVE)
-        );
+        ))?;
     }
-    println!(
+    say(format_args!(
         "{:<30} {summed:>10.1}  (part by part, with a device sync after each)",
         "sum"
-    );
+    ))?;
     if report.measured == "forward" {
-        println!(
+        say(format_args!(
             "{:.1} GFLOP per forward, {:.1} GFLOP/s",
             report.gflop,
             report.gflop / (report.median_ms / 1e3)
-        );
+        ))?;
     }
-    println!("{}_ms_median={:.1}", report.measured, report.median_ms);
-    Ok(())
+    say(format_args!(
+        "{}_ms_median={:.1}",
+        report.measured, report.median_ms
+    ))
 }
 
 fn median(times: &mut [Duration]) -> Duration {

@@ -3,6 +3,7 @@
 
 use super::{model_shape, Log, BUILTIN};
 use crate::cli::args::TrainArgs;
+use crate::cli::streams::{say, tell};
 use anyhow::{bail, Context};
 use indicatif::ProgressBar;
 use mvpcc::model::gan::StepLosses;
@@ -204,7 +205,7 @@ struct Progress {
 impl Monitor for Progress {
     fn message(&mut self, text: &str) {
         if !self.log.quiet() {
-            self.bar.suspend(|| eprintln!("{text}"));
+            self.bar.suspend(|| tell(text));
         }
     }
 
@@ -254,7 +255,7 @@ impl Monitor for Progress {
             ),
         };
         if !self.log.quiet() {
-            self.bar.suspend(|| eprintln!("{line}"));
+            self.bar.suspend(|| tell(line));
         }
     }
 
@@ -365,7 +366,7 @@ fn report(
             "validation": summary.last,
             "seen": summary.last_seen,
         });
-        println!("{}", serde_json::to_string_pretty(&json)?);
+        say(serde_json::to_string_pretty(&json)?)?;
     }
     Ok(())
 }

@@ -298,7 +298,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
                 colors16.push([c.red, c.green, c.blue]);
             }
             intensity.push(p.intensity as f64);
-            classification.push(u8::from(p.classification) as f64);
+            classification.push(class_code(&p) as f64);
             synthetic.push(if p.is_synthetic { 1.0 } else { 0.0 });
         }
     }
@@ -385,15 +385,57 @@ fn quantization_for(cloud: &PointCloud) -> Quantization {
     }
 }
 
+/// A point's classification as LAS 1.0–1.3 code it: the las crate reads code 12 ("overlap
+/// points") as class 1 with the overlap flag, which LAS 1.4's formats keep apart.
+fn class_code(p: &Point) -> u8 {
+    if p.is_overlap && p.classification == Classification::Unclassified {
+        OVERLAP_CLASS
+    } else {
+        u8::from(p.classification)
+    }
+}
+
+/// [`class_code`] undone for writing; codes outside a byte are clamped into it.
+fn class_and_overlap(code: f64) -> (Classification, bool) {
+    match Classification::new(code as u8) {
+        Ok(class) => (class, false),
+        Err(_) => (Classification::Unclassified, true),
+    }
+}
+
+const OVERLAP_CLASS: u8 = 12;
+
+/// The largest classification code point formats 0–5 hold (five bits); LAS 1.4's formats 6–10
+/// hold a byte, and MLS data uses codes above 31 for its own classes.
+const MAX_LEGACY_CLASS: f64 = 31.0;
+
+/// LAS 1.2 with point format 0 (or 2 with colour), which every reader takes; LAS 1.4 with
+/// format 6 (or 7) where a classification code needs more than five bits.
+fn version_and_format(color: bool, wide_classes: bool) -> (Builder, Format) {
+    let (version, plain, colored) = if wide_classes {
+        ((1, 4), Format::new(6), Format::new(7))
+    } else {
+        ((1, 2), Format::new(0), Format::new(2))
+    };
+    let format = if color { colored } else { plain };
+    (
+        Builder::from(version),
+        format.expect("formats 0, 2, 6 and 7 exist"),
+    )
+}
+
 pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Problem> {
     if cloud.is_empty() {
         return Err(Problem::NoPoints);
     }
     let q = quantization_for(cloud);
-    let mut builder = Builder::from((1, 2));
-    let mut format =
-        Format::new(if cloud.colors.is_some() { 2 } else { 0 }).map_err(las_problem)?;
+    let classification = cloud.attribute("classification");
+    let (mut builder, mut format) = version_and_format(
+        cloud.colors.is_some(),
+        classification.is_some_and(|a| a.values.iter().any(|&c| c > MAX_LEGACY_CLASS)),
+    );
     format.is_compressed = compressed;
+    let has_time = format.has_gps_time;
     builder.point_format = format;
     builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
     builder.transforms = Vector {
@@ -416,18 +458,20 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
         let intensity = cloud.attribute("intensity");
-        let classification = cloud.attribute("classification");
         let synthetic = cloud.attribute(SYNTHETIC);
         for i in 0..cloud.len() {
             let [x, y, z] = cloud.positions[i];
+            let (class, is_overlap) =
+                class_and_overlap(classification.map_or(0.0, |a| a.values[i]));
             let point = Point {
                 x,
                 y,
                 z,
                 intensity: intensity.map_or(0, |a| a.values[i] as u16),
-                classification: classification
-                    .and_then(|a| Classification::new(a.values[i] as u8).ok())
-                    .unwrap_or(Classification::CreatedNeverClassified),
+                classification: class,
+                is_overlap,
+                // LAS 1.4's formats carry a time for every point; the cloud holds none.
+                gps_time: has_time.then_some(0.0),
                 is_synthetic: synthetic.is_some_and(|a| a.values[i] != 0.0),
                 color: cloud.colors.as_ref().map(|c| Color {
                     red: c[i][0] as u16 * 257,

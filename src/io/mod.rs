@@ -579,6 +579,39 @@ mod tests {
         );
     }
 
+    /// LAS 1.4's point formats (6–10, as current MLS data comes) hold classification codes
+    /// above 31, which LAS 1.2's cannot: such a cloud failed to write ("invalid classification:
+    /// 64"). Code 12 ("overlap points"), which the las crate reads as class 1 with a flag,
+    /// came back as 1 and was written as 0.
+    #[test]
+    fn las_keeps_every_classification_code() {
+        for (codes, version, format) in [
+            ([1.0, 12.0, 2.0, 31.0], (1, 2), 2),
+            ([64.0, 12.0, 2.0, 255.0], (1, 4), 7),
+        ] {
+            let mut cloud = colored_cloud(true);
+            let n = cloud.len();
+            let classes = (0..n).map(|i| codes[i % codes.len()]).collect();
+            cloud.attributes[1].values = classes;
+            for ext in ["las", "laz"] {
+                let dir = tempfile::tempdir().unwrap();
+                let path = dir.path().join(format!("cloud.{ext}"));
+                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
+                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
+                let written = header.version();
+                assert_eq!((written.major, written.minor), version, "{codes:?} {ext}");
+                assert_eq!(header.point_format().to_u8().unwrap(), format);
+                let back = read_cloud(&path, None).unwrap().cloud;
+                assert_eq!(
+                    back.attribute("classification"),
+                    cloud.attribute("classification"),
+                    "{codes:?} {ext}"
+                );
+                assert_eq!(back.colors, cloud.colors);
+            }
+        }
+    }
+
     #[test]
     fn las_carries_the_synthetic_flag() {
         let mut cloud = colored_cloud(true);

@@ -1405,31 +1405,39 @@ fn prepared_views_match_the_reference_dataset_format() {
     }
 }
 
+/// Each `(option, value, what the parser says)` of `cases` refused in each of `commands`.
+fn each_refused(commands: &[&str], cases: &[(&str, &str, &str)]) {
+    let dir = TempDir::new().unwrap();
+    let cloud = write(&dir, "car.ply", &car());
+    let out = dir.path().join("out.ply");
+    for command in commands {
+        for (option, value, says) in cases {
+            refused_by_parser(&[command, s(&cloud), s(&out), option, value], says, &out);
+        }
+    }
+}
+
 /// `--sor-k 100000` on a 69,000-point cloud asked for 39 GB of distances and aborted; the
 /// neighbours are now bounded, in every command that filters.
 #[test]
 fn an_outlier_filter_of_too_many_neighbours_is_refused() {
-    let dir = TempDir::new().unwrap();
-    let cloud = write(&dir, "car.ply", &car());
-    let out = dir.path().join("out.ply");
-    for command in ["filter", "complete"] {
-        refused_by_parser(
-            &[command, s(&cloud), s(&out), "--sor-k", "100000"],
+    each_refused(
+        &["filter", "complete"],
+        &[(
+            "--sor-k",
+            "100000",
             "invalid value '100000' for '--sor-k <SOR_K>': 100000 is not in 0..=1000",
-            &out,
-        );
-    }
+        )],
+    );
 }
 
 /// `--erode 2` eroded as `--erode 3` and `--erode 4` as 5 without a word (a window centres on its
 /// pixel), and `--smooth 1000` took seconds to leave one point a view.
 #[test]
 fn window_sides_are_odd_and_bounded() {
-    let dir = TempDir::new().unwrap();
-    let cloud = write(&dir, "car.ply", &car());
-    let out = dir.path().join("out.ply");
-    for command in ["complete", "reproject"] {
-        for (option, value, problem) in [
+    each_refused(
+        &["complete", "reproject"],
+        &[
             (
                 "--erode",
                 "2",
@@ -1438,10 +1446,8 @@ fn window_sides_are_odd_and_bounded() {
             ("--smooth", "4", "4 is even"),
             ("--smooth", "33", "33 is wider than 31 pixels"),
             ("--erode", "x", "x is not a window side in pixels"),
-        ] {
-            refused_by_parser(&[command, s(&cloud), s(&out), option, value], problem, &out);
-        }
-    }
+        ],
+    );
 }
 
 /// A threshold given twice made two alike columns (and two alike `--json` entries).

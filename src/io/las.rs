@@ -281,9 +281,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     let batch = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
     let mut positions = Vec::new();
     let mut colors16 = Vec::new();
-    let mut intensity = Vec::new();
-    let mut classification = Vec::new();
-    let mut synthetic = Vec::new();
+    let mut fields = FIELDS.map(|_| Vec::new());
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
@@ -297,9 +295,9 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
             if let Some(c) = p.color {
                 colors16.push([c.red, c.green, c.blue]);
             }
-            intensity.push(p.intensity as f64);
-            classification.push(class_code(&p) as f64);
-            synthetic.push(if p.is_synthetic { 1.0 } else { 0.0 });
+            for (values, value) in fields.iter_mut().zip(field_values(&p)) {
+                values.push(value);
+            }
         }
     }
     let n = positions.len();
@@ -307,7 +305,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         return Err(Problem::Truncated { declared, found: n });
     }
     let colors = (has_color && colors16.len() == n).then(|| eight_bit(&colors16));
-    let attributes = attributes(intensity, classification, synthetic);
+    let attributes = attributes(fields, header.point_format().has_gps_time);
     Ok(PointCloud {
         positions,
         colors,
@@ -334,33 +332,53 @@ fn eight_bit(colors16: &[[u16; 3]]) -> Vec<[u8; 3]> {
         .collect()
 }
 
-/// The per-point fields kept beside the positions; the synthetic flag only where some point
-/// carries it.
-fn attributes(
-    intensity: Vec<f64>,
-    classification: Vec<f64>,
-    synthetic: Vec<f64>,
-) -> Vec<Attribute> {
-    let mut attributes = vec![
-        Attribute {
-            name: "intensity".into(),
-            kind: ScalarKind::U16,
-            values: intensity,
-        },
-        Attribute {
-            name: "classification".into(),
-            kind: ScalarKind::U8,
-            values: classification,
-        },
-    ];
-    if synthetic.contains(&1.0) {
-        attributes.push(Attribute {
-            name: SYNTHETIC.into(),
-            kind: ScalarKind::U8,
-            values: synthetic,
-        });
-    }
-    attributes
+/// The point record's fields kept as attributes, with their storage kinds, in the order the
+/// cloud holds them ([`field_values`] reads them from a point, [`write`] back).
+const FIELDS: [(&str, ScalarKind); 9] = [
+    ("intensity", ScalarKind::U16),
+    ("classification", ScalarKind::U8),
+    (SYNTHETIC, ScalarKind::U8),
+    ("return_number", ScalarKind::U8),
+    ("number_of_returns", ScalarKind::U8),
+    ("scan_angle", ScalarKind::F32),
+    ("user_data", ScalarKind::U8),
+    ("point_source_id", ScalarKind::U16),
+    ("gps_time", ScalarKind::F64),
+];
+
+/// One point's [`FIELDS`]; the scan angle in degrees, GPS time 0 where the format has none.
+fn field_values(p: &Point) -> [f64; 9] {
+    [
+        p.intensity as f64,
+        class_code(p) as f64,
+        if p.is_synthetic { 1.0 } else { 0.0 },
+        p.return_number as f64,
+        p.number_of_returns as f64,
+        p.scan_angle as f64,
+        p.user_data as f64,
+        p.point_source_id as f64,
+        p.gps_time.unwrap_or(0.0),
+    ]
+}
+
+/// The fields as attributes: intensity and classification always, GPS time where the point
+/// format has it, the others only where some point holds a value other than 0, so a file that
+/// leaves them unset does not add columns of zeros to every output.
+fn attributes(fields: [Vec<f64>; 9], has_gps_time: bool) -> Vec<Attribute> {
+    FIELDS
+        .iter()
+        .zip(fields)
+        .filter(|((name, _), values)| match *name {
+            "intensity" | "classification" => true,
+            "gps_time" => has_gps_time,
+            _ => values.iter().any(|&v| v != 0.0),
+        })
+        .map(|((name, kind), values)| Attribute {
+            name: (*name).into(),
+            kind: *kind,
+            values,
+        })
+        .collect()
 }
 
 /// The input's quantization when every point fits its 32-bit range; otherwise a fresh one
@@ -409,77 +427,112 @@ const OVERLAP_CLASS: u8 = 12;
 /// hold a byte, and MLS data uses codes above 31 for its own classes.
 const MAX_LEGACY_CLASS: f64 = 31.0;
 
-/// LAS 1.2 with point format 0 (or 2 with colour), which every reader takes; LAS 1.4 with
-/// format 6 (or 7) where a classification code needs more than five bits.
-fn version_and_format(color: bool, wide_classes: bool) -> (Builder, Format) {
-    let (version, plain, colored) = if wide_classes {
-        ((1, 4), Format::new(6), Format::new(7))
+/// The most returns of a pulse point formats 0–5 count (three bits); formats 6–10 count 15.
+const MAX_LEGACY_RETURNS: f64 = 7.0;
+
+/// LAS 1.2 with point format 0 (1 with GPS time, 2 with colour, 3 with both), which every reader
+/// takes; LAS 1.4 with format 6 (or 7 with colour; both with GPS time) where a classification
+/// code or a return number needs more bits than the older formats give it.
+fn version_and_format(color: bool, gps_time: bool, wide: bool) -> (Builder, Format) {
+    let (version, number) = if wide {
+        ((1, 4), 6 + u8::from(color))
     } else {
-        ((1, 2), Format::new(0), Format::new(2))
+        ((1, 2), u8::from(gps_time) + 2 * u8::from(color))
     };
-    let format = if color { colored } else { plain };
-    (
-        Builder::from(version),
-        format.expect("formats 0, 2, 6 and 7 exist"),
-    )
+    let format = Format::new(number).expect("formats 0–3, 6 and 7 exist");
+    (Builder::from(version), format)
+}
+
+/// Whether a value of the attribute `name` exceeds `max`.
+fn exceeds(cloud: &PointCloud, name: &str, max: f64) -> bool {
+    cloud
+        .attribute(name)
+        .is_some_and(|a| a.values.iter().any(|&v| v > max))
+}
+
+/// The header for `cloud`: its quantization, and the oldest version and smallest point format
+/// that hold its colour and its [`FIELDS`].
+fn header_for(cloud: &PointCloud, compressed: bool) -> Result<las::Header, Problem> {
+    let q = quantization_for(cloud);
+    let wide = exceeds(cloud, "classification", MAX_LEGACY_CLASS)
+        || exceeds(cloud, "return_number", MAX_LEGACY_RETURNS)
+        || exceeds(cloud, "number_of_returns", MAX_LEGACY_RETURNS);
+    let gps_time = cloud.attribute("gps_time").is_some();
+    let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide);
+    format.is_compressed = compressed;
+    builder.point_format = format;
+    builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
+    let axis = |k: usize| Transform {
+        scale: q.scale[k],
+        offset: q.offset[k],
+    };
+    builder.transforms = Vector {
+        x: axis(0),
+        y: axis(1),
+        z: axis(2),
+    };
+    builder.into_header().map_err(las_problem)
+}
+
+/// The scan angle the las crate is given for `degrees` read from a record: it stores degrees /
+/// 0.006 truncated, so `n · 0.006` computed in f32 may come back as `n − 1`; the step's middle
+/// (`n ± 0.5` steps, away from zero) truncates to `n`. Older formats store whole degrees, which
+/// it rounds, and the middle rounds to them too.
+fn scan_angle(degrees: f64) -> f32 {
+    const STEP: f64 = 0.006;
+    let steps = (degrees / STEP).round();
+    ((steps + 0.5f64.copysign(steps)) * STEP) as f32
+}
+
+/// Point `i` of `cloud` as a record of `format`: its [`FIELDS`] from the attributes `columns`
+/// (0 where the cloud has none), each cast into the record's field.
+fn record(
+    cloud: &PointCloud,
+    columns: &[Option<&Attribute>; 9],
+    i: usize,
+    format: &Format,
+) -> Point {
+    let [intensity, class, synthetic, ret, returns, angle, user, source, time] =
+        columns.map(|c| c.map_or(0.0, |a| a.values[i]));
+    let max_returns = if format.is_extended { 15 } else { 7 };
+    let (classification, is_overlap) = class_and_overlap(class);
+    let [x, y, z] = cloud.positions[i];
+    Point {
+        x,
+        y,
+        z,
+        intensity: intensity as u16,
+        classification,
+        is_overlap,
+        is_synthetic: synthetic != 0.0,
+        return_number: (ret as u8).min(max_returns),
+        number_of_returns: (returns as u8).min(max_returns),
+        scan_angle: scan_angle(angle),
+        user_data: user as u8,
+        point_source_id: source as u16,
+        gps_time: format.has_gps_time.then_some(time),
+        color: cloud.colors.as_ref().map(|c| Color {
+            red: c[i][0] as u16 * 257,
+            green: c[i][1] as u16 * 257,
+            blue: c[i][2] as u16 * 257,
+        }),
+        ..Default::default()
+    }
 }
 
 pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Problem> {
     if cloud.is_empty() {
         return Err(Problem::NoPoints);
     }
-    let q = quantization_for(cloud);
-    let classification = cloud.attribute("classification");
-    let (mut builder, mut format) = version_and_format(
-        cloud.colors.is_some(),
-        classification.is_some_and(|a| a.values.iter().any(|&c| c > MAX_LEGACY_CLASS)),
-    );
-    format.is_compressed = compressed;
-    let has_time = format.has_gps_time;
-    builder.point_format = format;
-    builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
-    builder.transforms = Vector {
-        x: Transform {
-            scale: q.scale[0],
-            offset: q.offset[0],
-        },
-        y: Transform {
-            scale: q.scale[1],
-            offset: q.offset[1],
-        },
-        z: Transform {
-            scale: q.scale[2],
-            offset: q.offset[2],
-        },
-    };
-    let header = builder.into_header().map_err(las_problem)?;
+    let header = header_for(cloud, compressed)?;
+    let format = *header.point_format();
+    let columns = FIELDS.map(|(name, _)| cloud.attribute(name));
     let tmp = super::temp_file_beside(path).map_err(super::write_problem)?;
     {
         let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
-        let intensity = cloud.attribute("intensity");
-        let synthetic = cloud.attribute(SYNTHETIC);
         for i in 0..cloud.len() {
-            let [x, y, z] = cloud.positions[i];
-            let (class, is_overlap) =
-                class_and_overlap(classification.map_or(0.0, |a| a.values[i]));
-            let point = Point {
-                x,
-                y,
-                z,
-                intensity: intensity.map_or(0, |a| a.values[i] as u16),
-                classification: class,
-                is_overlap,
-                // LAS 1.4's formats carry a time for every point; the cloud holds none.
-                gps_time: has_time.then_some(0.0),
-                is_synthetic: synthetic.is_some_and(|a| a.values[i] != 0.0),
-                color: cloud.colors.as_ref().map(|c| Color {
-                    red: c[i][0] as u16 * 257,
-                    green: c[i][1] as u16 * 257,
-                    blue: c[i][2] as u16 * 257,
-                }),
-                ..Default::default()
-            };
+            let point = record(cloud, &columns, i, &format);
             writer.write_point(point).map_err(las_problem)?;
         }
         writer.close().map_err(las_problem)?;

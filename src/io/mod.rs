@@ -612,6 +612,61 @@ mod tests {
         }
     }
 
+    /// A LAS file's returns, scan angle, user data, point source and GPS time were dropped on
+    /// reading, so `complete in.las out.las` lost them even for the measured points. They come
+    /// back as they were in both generations of point formats (the scan angle in 1.4's 0.006°
+    /// steps), and a cloud without them gains no columns.
+    #[test]
+    fn las_keeps_the_point_records_fields() {
+        let plain = round_trip("las", Encoding::Binary, &colored_cloud(true));
+        let names: Vec<&str> = plain.attributes.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(names, ["intensity", "classification"]);
+        // Whole degrees in LAS 1.2; 1.4's steps as the las crate turns them into degrees (these
+        // two came back one step smaller when written as read).
+        let steps = |n: [f32; 2]| n.map(|n| (n * 0.006) as f64);
+        for (classes, angles, format) in [
+            ([2.0, 6.0], [-15.0, 3.0], 3),
+            ([64.0, 2.0], steps([-2995.0, 2925.0]), 7),
+        ] {
+            let mut cloud = colored_cloud(true);
+            let n = cloud.len();
+            let column = |name: &str, kind, value: &dyn Fn(usize) -> f64| Attribute {
+                name: name.into(),
+                kind,
+                values: (0..n).map(value).collect(),
+            };
+            cloud.attributes[1].values = (0..n).map(|i| classes[i % 2]).collect();
+            cloud.attributes.extend([
+                column("return_number", ScalarKind::U8, &|i| (1 + i % 3) as f64),
+                column("number_of_returns", ScalarKind::U8, &|_| 3.0),
+                column("scan_angle", ScalarKind::F32, &|i| angles[i % 2]),
+                column("user_data", ScalarKind::U8, &|i| (i % 256) as f64),
+                column("point_source_id", ScalarKind::U16, &|i| (7 * i) as f64),
+                column("gps_time", ScalarKind::F64, &|i| {
+                    401_234.567_891 + i as f64 * 1e-6
+                }),
+            ]);
+            for ext in ["las", "laz"] {
+                let dir = tempfile::tempdir().unwrap();
+                let path = dir.path().join(format!("cloud.{ext}"));
+                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
+                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
+                assert_eq!(header.point_format().to_u8().unwrap(), format, "{ext}");
+                let back = read_cloud(&path, None).unwrap().cloud;
+                for want in &cloud.attributes {
+                    let got = back.attribute(&want.name);
+                    let got = got.unwrap_or_else(|| panic!("{} lost ({ext})", want.name));
+                    assert_eq!(
+                        (got.kind, &got.values),
+                        (want.kind, &want.values),
+                        "{}",
+                        want.name
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn las_carries_the_synthetic_flag() {
         let mut cloud = colored_cloud(true);

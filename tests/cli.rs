@@ -138,6 +138,25 @@ fn eval_reproduces_the_reference_fixture() {
         );
 }
 
+/// A reported result depends on the built-in model and the device as much as on the version,
+/// so `--version` names both; `-V` stays one line.
+#[test]
+fn the_long_version_names_the_built_in_model_and_the_backends() {
+    mvpcc().arg("--version").assert().success().stdout(
+        predicate::str::starts_with(format!("mvpcc {}\n", env!("CARGO_PKG_VERSION")))
+            .and(predicate::str::contains(format!(
+                "built-in model: {}",
+                mvpcc::complete::builtin_shape().unwrap().describe()
+            )))
+            .and(predicate::str::contains("backends: CPU (flex)")),
+    );
+    mvpcc()
+        .arg("-V")
+        .assert()
+        .success()
+        .stdout(format!("mvpcc {}\n", env!("CARGO_PKG_VERSION")));
+}
+
 /// `mvpcc eval … | head -1` panicked ("failed printing to stdout: Broken pipe") once its reader
 /// had gone. More results than a pipe's 64 KiB make the writer meet the closed pipe however the
 /// two processes are scheduled.

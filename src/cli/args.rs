@@ -6,7 +6,7 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use mvpcc::complete::filter::{SorParams, MAX_K};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
-use mvpcc::complete::{Method, Options, Roll};
+use mvpcc::complete::{Method, Options, Roll, DEFAULT_MODEL};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
@@ -15,8 +15,9 @@ use mvpcc::datagen::scan::{PartialKinds, PartialParams};
 use mvpcc::datagen::synth::Draw;
 use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
-use mvpcc::model::device::DeviceChoice;
+use mvpcc::model::device::{built_backends, DeviceChoice};
 use mvpcc::model::loss::Adversarial;
+use mvpcc::model::weights::{read_config, Network};
 use mvpcc::model::{Channels, Formulation, Fusion, Padding};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
@@ -48,18 +49,37 @@ impl Cli {
     /// reaches the option's own check ("thresholds must be positive numbers") where clap alone
     /// would answer "unexpected argument '-1' found".
     pub fn parse_negatives() -> Cli {
-        let command = Cli::command().mut_subcommands(|sub| {
-            sub.mut_args(|arg| {
-                let takes_values = arg.get_num_args().is_none_or(|n| n.takes_values());
-                if takes_values && arg.get_action().takes_values() {
-                    arg.allow_negative_numbers(true)
-                } else {
-                    arg
-                }
-            })
-        });
+        let command = Cli::command()
+            .long_version(long_version())
+            .mut_subcommands(|sub| {
+                sub.mut_args(|arg| {
+                    let takes_values = arg.get_num_args().is_none_or(|n| n.takes_values());
+                    if takes_values && arg.get_action().takes_values() {
+                        arg.allow_negative_numbers(true)
+                    } else {
+                        arg
+                    }
+                })
+            });
         Cli::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit())
     }
+}
+
+/// `--version`'s long form: besides the version, the model `complete` runs and the devices the
+/// build can use, which a reported result also depends on.
+fn long_version() -> String {
+    let model = read_config(DEFAULT_MODEL, Network::Generator).map_or_else(
+        |e| format!("unreadable ({e})"),
+        |c| {
+            let threshold = c.occupancy.map(|o| format!(", occupancy threshold {o}"));
+            format!("{}{}", c.describe(), threshold.unwrap_or_default())
+        },
+    );
+    format!(
+        "{}\nbuilt-in model: {model}\nbackends: {}",
+        env!("CARGO_PKG_VERSION"),
+        built_backends().join(", ")
+    )
 }
 
 #[derive(Debug, Subcommand)]

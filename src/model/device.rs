@@ -102,6 +102,18 @@ fn open_any_gpu() -> Opened {
         .map_or_else(|why| cpu(Some(why)), found)
 }
 
+/// The backends this build can run the network on, as `mvpcc --version` lists them.
+pub fn built_backends() -> Vec<&'static str> {
+    let mut backends = vec!["CPU (flex)"];
+    if cfg!(feature = "cuda") {
+        backends.push("CUDA");
+    }
+    if cfg!(feature = "wgpu") {
+        backends.push("wgpu");
+    }
+    backends
+}
+
 /// Two backends the build lacks are said in one clause, not two alike.
 fn both(cuda: &Unavailable, wgpu: &Unavailable) -> String {
     match (cuda, wgpu) {

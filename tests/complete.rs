@@ -217,6 +217,40 @@ fn timings_table_and_las_synthetic_flag() {
     assert!(out.len() > n);
 }
 
+/// A georeferenced LAS scan keeps what it was read with: the coordinate system, the scale and
+/// offset, and its points' GPS times (the added points take their nearest measured point's).
+#[test]
+fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
+    let dir = TempDir::new().unwrap();
+    let mut cloud = scan(6);
+    for p in &mut cloud.positions {
+        *p = [p[0] + 651_234.5, 5_234_567.25 - p[2], p[1] + 103.25];
+    }
+    let n = cloud.len();
+    cloud.attributes.push(mvpcc::core::cloud::Attribute {
+        name: "gps_time".into(),
+        kind: mvpcc::core::cloud::ScalarKind::F64,
+        values: (0..n).map(|i| 401_234.5 + i as f64 * 1e-5).collect(),
+    });
+    cloud.crs = vec![mvpcc::core::cloud::CrsRecord {
+        record_id: 2112,
+        description: "OGC WKT".into(),
+        data: b"PROJCS[\"ETRS89 / UTM zone 33N\"]\0".to_vec(),
+    }];
+    let input = dir.path().join("scan.las");
+    write_cloud(&input, &cloud, None, Encoding::Binary).unwrap();
+    let read = read_cloud(&input, None).unwrap().cloud;
+    let done = completed(&dir, &input, "done.las", &["--method", "mirror"]);
+    assert!(done.len() > n);
+    assert_eq!(done.crs, cloud.crs);
+    assert_eq!(done.quantization, read.quantization);
+    assert_eq!(&done.positions[..n], &read.positions[..]);
+    let times = &done.attribute("gps_time").unwrap().values;
+    assert_eq!(times[..n], read.attribute("gps_time").unwrap().values[..]);
+    let measured: std::collections::HashSet<u64> = times[..n].iter().map(|t| t.to_bits()).collect();
+    assert!(times[n..].iter().all(|t| measured.contains(&t.to_bits())));
+}
+
 #[test]
 fn baselines_need_no_model_and_the_network_alone_replaces_the_input() {
     let dir = TempDir::new().unwrap();

@@ -45,6 +45,15 @@ pub struct Quantization {
     pub offset: [f64; 3],
 }
 
+/// One record of a LAS file's coordinate reference system (a `LASF_Projection` VLR: GeoTIFF
+/// keys, their parameters, or WKT), kept as read so that a LAS output names the input's CRS.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CrsRecord {
+    pub record_id: u16,
+    pub description: String,
+    pub data: Vec<u8>,
+}
+
 /// Positions in f64 (MLS files carry georeferenced coordinates in the hundreds of kilometres),
 /// optional 8-bit RGB, and the input's other attributes.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -53,6 +62,9 @@ pub struct PointCloud {
     pub colors: Option<Vec<[u8; 3]>>,
     pub attributes: Vec<Attribute>,
     pub quantization: Option<Quantization>,
+    /// The coordinate reference system the positions are in, where the input named one; empty
+    /// otherwise, and for normalized clouds.
+    pub crs: Vec<CrsRecord>,
 }
 
 /// Axis-aligned bounding box.
@@ -139,6 +151,7 @@ impl PointCloud {
                 })
                 .collect(),
             quantization: self.quantization,
+            crs: self.crs.clone(),
         }
     }
 
@@ -222,12 +235,14 @@ mod tests {
             colors: Some(vec![[1, 2, 3]]),
             attributes: vec![intensity(vec![7.0])],
             quantization: None,
+            crs: Vec::new(),
         };
         let other = PointCloud {
             positions: vec![[1.0; 3], [2.0; 3]],
             colors: Some(vec![[4, 5, 6], [7, 8, 9]]),
             attributes: vec![intensity(vec![8.0, 9.0])],
             quantization: None,
+            crs: Vec::new(),
         };
         cloud.append(other.clone());
         assert_eq!(cloud.positions, [[0.0; 3], [1.0; 3], [2.0; 3]]);
@@ -256,6 +271,7 @@ mod tests {
                 values: vec![10.0, 20.0, 30.0],
             }],
             quantization: None,
+            crs: Vec::new(),
         }
     }
 

@@ -200,6 +200,7 @@ impl Frame {
                 .map(|&p| self.to_normalized(p))
                 .collect(),
             quantization: None,
+            crs: Vec::new(),
             ..cloud.clone()
         }
     }

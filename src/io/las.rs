@@ -3,10 +3,10 @@
 //! (the [`SYNTHETIC`] attribute).
 
 use super::{check_points, Problem};
-use crate::core::cloud::{Attribute, PointCloud, Quantization, ScalarKind, SYNTHETIC};
+use crate::core::cloud::{Attribute, CrsRecord, PointCloud, Quantization, ScalarKind, SYNTHETIC};
 use crate::core::guard::guarded;
 use las::point::{Classification, Format};
-use las::{Builder, Color, Point, Transform, Vector, Writer};
+use las::{Builder, Color, Point, Transform, Vector, Vlr, Writer};
 use std::io::{BufReader, BufWriter};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -311,7 +311,42 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         colors,
         attributes,
         quantization: Some(quantization),
+        crs: crs_records(&header),
     })
+}
+
+/// The user ID of the VLRs that hold a LAS file's coordinate reference system.
+const CRS_USER: &str = "LASF_Projection";
+
+/// The header's CRS records, VLRs and EVLRs alike.
+fn crs_records(header: &las::Header) -> Vec<CrsRecord> {
+    header
+        .all_vlrs()
+        .filter(|v| v.is_crs())
+        .map(|v| CrsRecord {
+            record_id: v.record_id,
+            description: v.description.clone(),
+            data: v.data.clone(),
+        })
+        .collect()
+}
+
+/// [`crs_records`] undone: records too long for a VLR (over 64 KiB, which only a long WKT
+/// reaches) go into EVLRs, which need LAS 1.4 ([`header_for`] chooses it then).
+fn add_crs(builder: &mut Builder, crs: &[CrsRecord]) {
+    for record in crs {
+        let vlr = Vlr {
+            user_id: CRS_USER.into(),
+            record_id: record.record_id,
+            description: record.description.clone(),
+            data: record.data.clone(),
+        };
+        if record.data.len() > usize::from(u16::MAX) {
+            builder.evlrs.push(vlr);
+        } else {
+            builder.vlrs.push(vlr);
+        }
+    }
 }
 
 /// LAS colours as 8-bit: most writers scale 8-bit colour to 16 bits; some store 8-bit values
@@ -456,12 +491,17 @@ fn header_for(cloud: &PointCloud, compressed: bool) -> Result<las::Header, Probl
     let q = quantization_for(cloud);
     let wide = exceeds(cloud, "classification", MAX_LEGACY_CLASS)
         || exceeds(cloud, "return_number", MAX_LEGACY_RETURNS)
-        || exceeds(cloud, "number_of_returns", MAX_LEGACY_RETURNS);
+        || exceeds(cloud, "number_of_returns", MAX_LEGACY_RETURNS)
+        || cloud
+            .crs
+            .iter()
+            .any(|r| r.data.len() > usize::from(u16::MAX));
     let gps_time = cloud.attribute("gps_time").is_some();
     let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide);
     format.is_compressed = compressed;
     builder.point_format = format;
     builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
+    add_crs(&mut builder, &cloud.crs);
     let axis = |k: usize| Transform {
         scale: q.scale[k],
         offset: q.offset[k],

@@ -495,6 +495,7 @@ mod tests {
                 },
             ],
             quantization: None,
+            crs: Vec::new(),
         }
     }
 
@@ -665,6 +666,45 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The CRS records of a LAS input were dropped, so a georeferenced scan came out of
+    /// `complete` with no coordinate system. GeoTIFF keys stay in LAS 1.2; a WKT too long for a
+    /// VLR goes into an EVLR of LAS 1.4.
+    #[test]
+    fn las_keeps_the_coordinate_reference_system() {
+        let record = |record_id, data: Vec<u8>| crate::core::cloud::CrsRecord {
+            record_id,
+            description: format!("record {record_id}"),
+            data,
+        };
+        let geotiff = vec![
+            record(
+                34735,
+                [1u16, 1, 0, 1, 3072, 0, 1, 25833]
+                    .map(u16::to_le_bytes)
+                    .concat(),
+            ),
+            record(34737, b"ETRS89 / UTM zone 33N|\0".to_vec()),
+        ];
+        let long_wkt = vec![record(2112, vec![b'W'; 70_000])];
+        for (crs, version) in [(geotiff, (1, 2)), (long_wkt, (1, 4))] {
+            let cloud = PointCloud {
+                crs: crs.clone(),
+                ..colored_cloud(true)
+            };
+            for ext in ["las", "laz"] {
+                let dir = tempfile::tempdir().unwrap();
+                let path = dir.path().join(format!("cloud.{ext}"));
+                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
+                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
+                let written = header.version();
+                assert_eq!((written.major, written.minor), version, "{ext}");
+                assert_eq!(read_cloud(&path, None).unwrap().cloud.crs, crs, "{ext}");
+            }
+        }
+        let ply = round_trip("ply", Encoding::Binary, &colored_cloud(true));
+        assert!(ply.crs.is_empty());
     }
 
     #[test]

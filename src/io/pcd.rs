@@ -276,6 +276,7 @@ impl Collector {
                     })
                     .collect(),
                 quantization: None,
+                crs: Vec::new(),
             },
             attributes,
         }

@@ -506,6 +506,19 @@ mod tests {
         read_cloud(&path, None).unwrap().cloud
     }
 
+    /// `cloud` written as LAS or LAZ and read back, with the version and the point format its
+    /// header declares.
+    fn las_round_trip(ext: &str, cloud: &PointCloud) -> (PointCloud, (u8, u8), u8) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(format!("cloud.{ext}"));
+        write_cloud(&path, cloud, None, Encoding::Binary).unwrap();
+        let header = ::las::Reader::from_path(&path).unwrap().header().clone();
+        let version = header.version();
+        let format = header.point_format().to_u8().unwrap();
+        let back = read_cloud(&path, None).unwrap().cloud;
+        (back, (version.major, version.minor), format)
+    }
+
     #[test]
     fn ply_and_pcd_round_trip_exactly_in_every_encoding() {
         for geo in [false, true] {
@@ -595,14 +608,12 @@ mod tests {
             let classes = (0..n).map(|i| codes[i % codes.len()]).collect();
             cloud.attributes[1].values = classes;
             for ext in ["las", "laz"] {
-                let dir = tempfile::tempdir().unwrap();
-                let path = dir.path().join(format!("cloud.{ext}"));
-                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
-                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
-                let written = header.version();
-                assert_eq!((written.major, written.minor), version, "{codes:?} {ext}");
-                assert_eq!(header.point_format().to_u8().unwrap(), format);
-                let back = read_cloud(&path, None).unwrap().cloud;
+                let (back, written, written_format) = las_round_trip(ext, &cloud);
+                assert_eq!(
+                    (written, written_format),
+                    (version, format),
+                    "{codes:?} {ext}"
+                );
                 assert_eq!(
                     back.attribute("classification"),
                     cloud.attribute("classification"),
@@ -648,12 +659,8 @@ mod tests {
                 }),
             ]);
             for ext in ["las", "laz"] {
-                let dir = tempfile::tempdir().unwrap();
-                let path = dir.path().join(format!("cloud.{ext}"));
-                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
-                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
-                assert_eq!(header.point_format().to_u8().unwrap(), format, "{ext}");
-                let back = read_cloud(&path, None).unwrap().cloud;
+                let (back, _, written_format) = las_round_trip(ext, &cloud);
+                assert_eq!(written_format, format, "{ext}");
                 for want in &cloud.attributes {
                     let got = back.attribute(&want.name);
                     let got = got.unwrap_or_else(|| panic!("{} lost ({ext})", want.name));
@@ -694,13 +701,8 @@ mod tests {
                 ..colored_cloud(true)
             };
             for ext in ["las", "laz"] {
-                let dir = tempfile::tempdir().unwrap();
-                let path = dir.path().join(format!("cloud.{ext}"));
-                write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
-                let header = ::las::Reader::from_path(&path).unwrap().header().clone();
-                let written = header.version();
-                assert_eq!((written.major, written.minor), version, "{ext}");
-                assert_eq!(read_cloud(&path, None).unwrap().cloud.crs, crs, "{ext}");
+                let (back, written, _) = las_round_trip(ext, &cloud);
+                assert_eq!((back.crs, written), (crs.clone(), version), "{ext}");
             }
         }
         let ply = round_trip("ply", Encoding::Binary, &colored_cloud(true));

@@ -305,7 +305,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         return Err(Problem::Truncated { declared, found: n });
     }
     let colors = (has_color && colors16.len() == n).then(|| eight_bit(&colors16));
-    let attributes = attributes(fields, header.point_format().has_gps_time);
+    let attributes = attributes(fields);
     Ok(PointCloud {
         positions,
         colors,
@@ -396,17 +396,15 @@ fn field_values(p: &Point) -> [f64; 9] {
     ]
 }
 
-/// The fields as attributes: intensity and classification always, GPS time where the point
-/// format has it, the others only where some point holds a value other than 0, so a file that
-/// leaves them unset does not add columns of zeros to every output.
-fn attributes(fields: [Vec<f64>; 9], has_gps_time: bool) -> Vec<Attribute> {
+/// The fields as attributes: intensity and classification always, the others only where some
+/// point holds a value other than 0, so a file that leaves them unset (LAS 1.4's formats always
+/// have a GPS time, most writers leave the rest) does not add columns of zeros to every output.
+fn attributes(fields: [Vec<f64>; 9]) -> Vec<Attribute> {
     FIELDS
         .iter()
         .zip(fields)
-        .filter(|((name, _), values)| match *name {
-            "intensity" | "classification" => true,
-            "gps_time" => has_gps_time,
-            _ => values.iter().any(|&v| v != 0.0),
+        .filter(|((name, _), values)| {
+            matches!(*name, "intensity" | "classification") || values.iter().any(|&v| v != 0.0)
         })
         .map(|((name, kind), values)| Attribute {
             name: (*name).into(),

@@ -1,6 +1,6 @@
 //! LAS and LAZ through the `las` crate: scaled integer coordinates (scale and offset kept for
-//! writing back), RGB (16-bit scaled to 8), intensity, classification and the synthetic flag
-//! (the [`SYNTHETIC`] attribute).
+//! writing back), RGB (16-bit scaled to 8), the point record's fields ([`FIELDS`], the synthetic
+//! flag as the [`SYNTHETIC`] attribute) and the coordinate reference system's records.
 
 use super::{check_points, Problem};
 use crate::core::cloud::{Attribute, CrsRecord, PointCloud, Quantization, ScalarKind, SYNTHETIC};

@@ -465,7 +465,7 @@ const MAX_LEGACY_RETURNS: f64 = 7.0;
 
 /// LAS 1.2 with point format 0 (1 with GPS time, 2 with colour, 3 with both), which every reader
 /// takes; LAS 1.4 with format 6 (or 7 with colour; both with GPS time) where a classification
-/// code or a return number needs more bits than the older formats give it.
+/// code, a return number or a scan angle needs more than the older formats give it.
 fn version_and_format(color: bool, gps_time: bool, wide: bool) -> (Builder, Format) {
     let (version, number) = if wide {
         ((1, 4), 6 + u8::from(color))
@@ -474,6 +474,16 @@ fn version_and_format(color: bool, gps_time: bool, wide: bool) -> (Builder, Form
     };
     let format = Format::new(number).expect("formats 0–3, 6 and 7 exist");
     (Builder::from(version), format)
+}
+
+/// Whether a scan angle needs LAS 1.4's 0.006° steps: the older formats hold whole degrees
+/// from −128 to 127.
+fn finer_than_degrees(cloud: &PointCloud) -> bool {
+    cloud.attribute("scan_angle").is_some_and(|a| {
+        a.values
+            .iter()
+            .any(|&v| v.fract() != 0.0 || !(-128.0..=127.0).contains(&v))
+    })
 }
 
 /// Whether a value of the attribute `name` exceeds `max`.
@@ -490,6 +500,7 @@ fn header_for(cloud: &PointCloud, compressed: bool) -> Result<las::Header, Probl
     let wide = exceeds(cloud, "classification", MAX_LEGACY_CLASS)
         || exceeds(cloud, "return_number", MAX_LEGACY_RETURNS)
         || exceeds(cloud, "number_of_returns", MAX_LEGACY_RETURNS)
+        || finer_than_degrees(cloud)
         || cloud
             .crs
             .iter()

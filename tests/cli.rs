@@ -509,13 +509,16 @@ fn bad_inputs_fail_cleanly() {
         fails(&["filter", s(&input), o], name, problem, &out);
     }
 
-    let all_nan = write_bytes(&dir, "allnan.xyz", b"nan 0 0\n0 inf 0\n");
-    fails(
-        &["filter", s(&all_nan), o],
-        "allnan.xyz",
-        "NaN or infinite",
-        &out,
-    );
+    for (bytes, said) in [
+        (
+            &b"nan 0 0\n0 inf 0\n"[..],
+            "all 2 points have NaN or infinite",
+        ),
+        (b"nan 0 0\n", "its one point has NaN or infinite"),
+    ] {
+        let all_nan = write_bytes(&dir, "allnan.xyz", bytes);
+        fails(&["filter", s(&all_nan), o], "allnan.xyz", said, &out);
+    }
 
     let same = write_bytes(&dir, "same.xyz", b"1 2 3\n1 2 3\n1 2 3\n");
     let views = dir.path().join("views");

@@ -5,6 +5,11 @@ pub mod args;
 pub mod commands;
 pub mod streams;
 
+/// `n` and the noun, plural unless `n` is 1: "1 view", "4 views".
+pub fn count(n: usize, noun: &str) -> String {
+    format!("{n} {noun}{}", if n == 1 { "" } else { "s" })
+}
+
 /// The error and its causes joined by ": " on one line. A cause whose text an outer error
 /// already quotes (as `"{path}: {source}"` messages do) is not repeated.
 pub fn one_line(e: &anyhow::Error) -> String {
@@ -24,6 +29,12 @@ pub fn one_line(e: &anyhow::Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::one_line;
+
+    #[test]
+    fn a_count_of_one_is_singular() {
+        let said = [0, 1, 4].map(|n| super::count(n, "view"));
+        assert_eq!(said, ["0 views", "1 view", "4 views"]);
+    }
 
     #[test]
     fn causes_are_joined_on_one_line_and_quoted_ones_not_repeated() {

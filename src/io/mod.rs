@@ -94,7 +94,7 @@ pub enum Problem {
     EmptyFile,
     #[error("contains no points")]
     NoPoints,
-    #[error("all {0} points have NaN or infinite coordinates")]
+    #[error("{} NaN or infinite coordinates", if *.0 == 1 { "its one point has".to_string() } else { format!("all {} points have", .0) })]
     AllNonFinite(usize),
     #[error("unsupported file extension {0:?} (expected ply, pcd, las, laz, xyz, txt, csv or pts; or pass --format)")]
     UnsupportedExtension(String),

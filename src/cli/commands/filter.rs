@@ -1,5 +1,6 @@
 use super::{load, Log};
 use crate::cli::args::FilterArgs;
+use crate::cli::count;
 use mvpcc::complete::filter::inliers;
 use mvpcc::io::{check_output, output_format, write_cloud};
 
@@ -15,11 +16,11 @@ pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
         args.output_options.encoding,
     )?;
     log.info(format!(
-        "{}: kept {} of {} points ({} outliers removed, k = {}, σ = {})",
+        "{}: kept {} of {} ({} removed, k = {}, σ = {})",
         args.output.display(),
         filtered.len(),
-        cloud.len(),
-        cloud.len() - filtered.len(),
+        count(cloud.len(), "point"),
+        count(cloud.len() - filtered.len(), "outlier"),
         args.sor.sor_k,
         args.sor.sor_std
     ));

@@ -116,8 +116,10 @@ pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Res
 
 /// What reading dropped, when it dropped points with NaN or infinite coordinates.
 pub(crate) fn non_finite_warning(dropped: usize) -> Option<String> {
-    let points = if dropped == 1 { "point" } else { "points" };
-    (dropped > 0).then(|| format!("dropped {dropped} {points} with NaN or infinite coordinates"))
+    (dropped > 0).then(|| {
+        let points = crate::cli::count(dropped, "point");
+        format!("dropped {points} with NaN or infinite coordinates")
+    })
 }
 
 /// A training loop's progress bar over `steps` (0 until the loop knows them) on stderr, with

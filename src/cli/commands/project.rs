@@ -1,5 +1,6 @@
 use super::{load, Log};
 use crate::cli::args::ProjectArgs;
+use crate::cli::count;
 use anyhow::Context;
 use mvpcc::core::camera::{Camera, CameraError};
 use mvpcc::core::frame::{Frame, UpAxis};
@@ -48,13 +49,13 @@ pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
     };
     info.write(outdir)?;
     log.info(format!(
-        "{}: {} points → {} views of {}×{} px, {} pixels occupied",
+        "{}: {} → {} of {}×{} px, {} occupied",
         outdir.display(),
-        cloud.len(),
-        views.views(),
+        count(cloud.len(), "point"),
+        count(views.views(), "view"),
         args.size,
         args.size,
-        views.occupied()
+        count(views.occupied(), "pixel")
     ));
     Ok(())
 }

@@ -1,5 +1,6 @@
 use super::Log;
 use crate::cli::args::ReprojectArgs;
+use crate::cli::count;
 use anyhow::bail;
 use mvpcc::complete::filter::inliers;
 use mvpcc::io::{check_output, output_format, write_cloud};
@@ -50,13 +51,13 @@ pub(super) fn run(args: ReprojectArgs, log: Log) -> anyhow::Result<()> {
         args.output_options.encoding,
     )?;
     log.info(format!(
-        "{}: {} points from {} views ({} occupied pixels, {} after erosion and de-duplication, {} outliers removed)",
+        "{}: {} from {} ({} occupied, {} after erosion and de-duplication, {} removed)",
         args.output.display(),
-        output.len(),
-        views.views(),
-        views.occupied(),
+        count(output.len(), "point"),
+        count(views.views(), "view"),
+        count(views.occupied(), "pixel"),
         merged.len(),
-        merged.len() - output.len()
+        count(merged.len() - output.len(), "outlier")
     ));
     Ok(())
 }

@@ -218,7 +218,8 @@ fn timings_table_and_las_synthetic_flag() {
 }
 
 /// A georeferenced LAS scan keeps what it was read with: the coordinate system, the scale and
-/// offset, and its points' GPS times (the added points take their nearest measured point's).
+/// offset, its points' GPS times and its extra bytes, stored as they were (the added points
+/// take their nearest measured point's values).
 #[test]
 fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     let dir = TempDir::new().unwrap();
@@ -232,10 +233,23 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
         kind: mvpcc::core::cloud::ScalarKind::F64,
         values: (0..n).map(|i| 401_234.5 + i as f64 * 1e-5).collect(),
     });
+    cloud.attributes.push(mvpcc::core::cloud::Attribute {
+        name: "Reflectance".into(),
+        kind: mvpcc::core::cloud::ScalarKind::F64,
+        values: (0..n).map(|i| 0.01 * (i % 3000) as f64 - 15.0).collect(),
+    });
     cloud.crs = vec![mvpcc::core::cloud::CrsRecord {
         record_id: 2112,
         description: "OGC WKT".into(),
         data: b"PROJCS[\"ETRS89 / UTM zone 33N\"]\0".to_vec(),
+    }];
+    cloud.extra_bytes = vec![mvpcc::core::cloud::StoredField {
+        name: "Reflectance".into(),
+        data_type: 4,
+        scale: 0.01,
+        offset: -15.0,
+        no_data: None,
+        description: "dB".into(),
     }];
     let input = dir.path().join("scan.las");
     write_cloud(&input, &cloud, None, Encoding::Binary).unwrap();
@@ -245,10 +259,25 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     assert_eq!(done.crs, cloud.crs);
     assert_eq!(done.quantization, read.quantization);
     assert_eq!(&done.positions[..n], &read.positions[..]);
-    let times = &done.attribute("gps_time").unwrap().values;
-    assert_eq!(times[..n], read.attribute("gps_time").unwrap().values[..]);
-    let measured: std::collections::HashSet<u64> = times[..n].iter().map(|t| t.to_bits()).collect();
-    assert!(times[n..].iter().all(|t| measured.contains(&t.to_bits())));
+    assert_eq!(done.extra_bytes, cloud.extra_bytes);
+    // A PLY output has no place for the coordinate system, and says so.
+    for command in ["complete", "filter"] {
+        mvpcc()
+            .args([command, s(&input), s(&dir.path().join("done.ply"))])
+            .args(["--method", "mirror"].iter().filter(|_| command == "complete"))
+            .assert()
+            .success()
+            .stderr(predicate::str::contains(
+                "scan.las: its coordinate reference system is not written",
+            ));
+    }
+    for name in ["gps_time", "Reflectance"] {
+        let values = &done.attribute(name).unwrap().values;
+        assert_eq!(values[..n], read.attribute(name).unwrap().values[..]);
+        let measured: std::collections::HashSet<u64> =
+            values[..n].iter().map(|t| t.to_bits()).collect();
+        assert!(values[n..].iter().all(|t| measured.contains(&t.to_bits())));
+    }
 }
 
 #[test]

@@ -54,6 +54,21 @@ pub struct CrsRecord {
     pub data: Vec<u8>,
 }
 
+/// How a LAS input stored one of its extra-bytes fields (the attribute of the same name), kept
+/// so that a LAS output stores it alike: a scaled integer stays a scaled integer of its width.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredField {
+    pub name: String,
+    /// LAS's data type code, 1–10: u8, i8, u16, i16, u32, i32, u64, i64, f32, f64.
+    pub data_type: u8,
+    /// The value is `offset + scale · stored`.
+    pub scale: f64,
+    pub offset: f64,
+    /// The stored value that marks "no data", as the field's description holds it.
+    pub no_data: Option<[u8; 8]>,
+    pub description: String,
+}
+
 /// Positions in f64 (MLS files carry georeferenced coordinates in the hundreds of kilometres),
 /// optional 8-bit RGB, and the input's other attributes.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -65,6 +80,8 @@ pub struct PointCloud {
     /// The coordinate reference system the positions are in, where the input named one; empty
     /// otherwise, and for normalized clouds.
     pub crs: Vec<CrsRecord>,
+    /// How a LAS input stored the attributes it held as extra bytes; empty otherwise.
+    pub extra_bytes: Vec<StoredField>,
 }
 
 /// Axis-aligned bounding box.
@@ -152,6 +169,7 @@ impl PointCloud {
                 .collect(),
             quantization: self.quantization,
             crs: self.crs.clone(),
+            extra_bytes: self.extra_bytes.clone(),
         }
     }
 
@@ -236,6 +254,7 @@ mod tests {
             attributes: vec![intensity(vec![7.0])],
             quantization: None,
             crs: Vec::new(),
+            extra_bytes: Vec::new(),
         };
         let other = PointCloud {
             positions: vec![[1.0; 3], [2.0; 3]],
@@ -243,6 +262,7 @@ mod tests {
             attributes: vec![intensity(vec![8.0, 9.0])],
             quantization: None,
             crs: Vec::new(),
+            extra_bytes: Vec::new(),
         };
         cloud.append(other.clone());
         assert_eq!(cloud.positions, [[0.0; 3], [1.0; 3], [2.0; 3]]);
@@ -272,6 +292,7 @@ mod tests {
             }],
             quantization: None,
             crs: Vec::new(),
+            extra_bytes: Vec::new(),
         }
     }
 

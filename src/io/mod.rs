@@ -300,6 +300,14 @@ pub fn write_cloud(
     .map_err(err)
 }
 
+/// What `cloud` holds that a `format` file has no place for, as a warning: a LAS input's
+/// coordinate reference system, which only LAS and LAZ store.
+pub fn unwritten(cloud: &PointCloud, format: Format) -> Option<&'static str> {
+    (!cloud.crs.is_empty() && !matches!(format, Format::Las | Format::Laz)).then_some(
+        "its coordinate reference system is not written: only a LAS or LAZ output holds one",
+    )
+}
+
 /// Refuses an output that is one of the inputs (also through symbolic links), a directory, and an
 /// output whose directory does not exist; standard output (`-`) is none of them.
 pub fn check_output(output: &Path, inputs: &[&Path]) -> Result<(), CloudIoError> {
@@ -496,6 +504,7 @@ mod tests {
             ],
             quantization: None,
             crs: Vec::new(),
+            extra_bytes: Vec::new(),
         }
     }
 

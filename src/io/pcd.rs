@@ -277,6 +277,7 @@ impl Collector {
                     .collect(),
                 quantization: None,
                 crs: Vec::new(),
+                extra_bytes: Vec::new(),
             },
             attributes,
         }

@@ -16,7 +16,7 @@ use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::io::batch::{self, read_list, walk};
 use mvpcc::io::stdio::is_stdio;
 use mvpcc::io::{
-    atomic_write, check_output, read_bytes, read_cloud, same_file, write_cloud, Format,
+    atomic_write, check_output, read_bytes, read_cloud, same_file, unwritten, write_cloud, Format,
 };
 use mvpcc::model::device::DeviceChoice;
 use mvpcc::model::inpaint::Inpainter;
@@ -257,6 +257,7 @@ fn complete_file(
     let warnings = &mut run.completion.warnings;
     warnings.splice(0..0, non_finite_warning(loaded.non_finite_dropped));
     warnings.extend(saved);
+    warnings.extend(unwritten(&cloud, format).map(String::from));
     if let Some((_, report)) = &run.cleaned {
         log.info(format!(
             "{}: --clean removed {} ground, {} isolated and {} other-object points",

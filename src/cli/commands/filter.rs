@@ -2,12 +2,15 @@ use super::{load, Log};
 use crate::cli::args::FilterArgs;
 use crate::cli::count;
 use mvpcc::complete::filter::inliers;
-use mvpcc::io::{check_output, output_format, write_cloud};
+use mvpcc::io::{check_output, output_format, unwritten, write_cloud};
 
 pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
     check_output(&args.output, &[&args.input])?;
-    output_format(&args.output, args.output_options.out_format)?;
+    let format = output_format(&args.output, args.output_options.out_format)?;
     let cloud = load(&args.input, args.input_options.format, log)?;
+    if let Some(warning) = unwritten(&cloud, format) {
+        log.warn(format!("{}: {warning}", args.input.display()));
+    }
     let filtered = cloud.filter(&inliers(&cloud.positions, args.sor.params()));
     write_cloud(
         &args.output,

@@ -1,6 +1,9 @@
 //! LAS and LAZ through the `las` crate: scaled integer coordinates (scale and offset kept for
 //! writing back), RGB (16-bit scaled to 8), the point record's fields ([`FIELDS`], the synthetic
-//! flag as the [`SYNTHETIC`] attribute) and the coordinate reference system's records.
+//! flag as the [`SYNTHETIC`] attribute), the extra bytes ([`extra_bytes`]) and the coordinate
+//! reference system's records.
+
+mod extra_bytes;
 
 use super::{check_points, Problem};
 use crate::core::cloud::{Attribute, CrsRecord, PointCloud, Quantization, ScalarKind, SYNTHETIC};
@@ -282,6 +285,8 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     let mut positions = Vec::new();
     let mut colors16 = Vec::new();
     let mut fields = Columns::new();
+    let mut extra =
+        extra_bytes::Columns::new(extra_bytes::described(&header), &FIELDS.map(|f| f.0));
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
@@ -296,6 +301,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
                 colors16.push([c.red, c.green, c.blue]);
             }
             fields.push(field_values(&p));
+            extra.push(&p.extra_bytes);
         }
     }
     let n = positions.len();
@@ -303,13 +309,16 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         return Err(Problem::Truncated { declared, found: n });
     }
     let colors = (has_color && colors16.len() == n).then(|| eight_bit(&colors16));
-    let attributes = fields.into_attributes();
+    let mut attributes = fields.into_attributes();
+    let (more, extra_bytes) = extra.into_attributes();
+    attributes.extend(more);
     Ok(PointCloud {
         positions,
         colors,
         attributes,
         quantization: Some(quantization),
         crs: crs_records(&header),
+        extra_bytes,
     })
 }
 
@@ -523,9 +532,13 @@ fn exceeds(cloud: &PointCloud, name: &str, max: f64) -> bool {
         .is_some_and(|a| a.values.iter().any(|&v| v > max))
 }
 
-/// The header for `cloud`: its quantization, and the oldest version and smallest point format
-/// that hold its colour and its [`FIELDS`].
-fn header_for(cloud: &PointCloud, compressed: bool) -> Result<las::Header, Problem> {
+/// The header for `cloud`: its quantization, the oldest version and smallest point format that
+/// hold its colour and its [`FIELDS`], and room for its other attributes as `extra` lays them out.
+fn header_for(
+    cloud: &PointCloud,
+    extra: &extra_bytes::Layout,
+    compressed: bool,
+) -> Result<las::Header, Problem> {
     let q = quantization_for(cloud);
     let wide = exceeds(cloud, "classification", MAX_LEGACY_CLASS)
         || exceeds(cloud, "return_number", MAX_LEGACY_RETURNS)
@@ -538,7 +551,17 @@ fn header_for(cloud: &PointCloud, compressed: bool) -> Result<las::Header, Probl
     let gps_time = cloud.attribute("gps_time").is_some();
     let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide);
     format.is_compressed = compressed;
+    format.extra_bytes = u16::try_from(format.len() as usize + extra.len())
+        .map(|_| extra.len() as u16)
+        .map_err(|_| {
+            Problem::Malformed(format!(
+                "its {} attributes need {} bytes a point, more than a LAS point record holds",
+                cloud.attributes.len(),
+                extra.len()
+            ))
+        })?;
     builder.point_format = format;
+    builder.vlrs.extend(extra.vlr());
     builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
     add_crs(&mut builder, &cloud.crs);
     let axis = |k: usize| Transform {
@@ -603,7 +626,8 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
     if cloud.is_empty() {
         return Err(Problem::NoPoints);
     }
-    let header = header_for(cloud, compressed)?;
+    let extra = extra_bytes::Layout::new(cloud, &FIELDS.map(|f| f.0));
+    let header = header_for(cloud, &extra, compressed)?;
     let format = *header.point_format();
     let columns = FIELDS.map(|(name, _)| cloud.attribute(name));
     let tmp = super::temp_file_beside(path).map_err(super::write_problem)?;
@@ -611,7 +635,10 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
         let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
         for i in 0..cloud.len() {
-            let point = record(cloud, &columns, i, &format);
+            let point = Point {
+                extra_bytes: extra.bytes(i),
+                ..record(cloud, &columns, i, &format)
+            };
             writer.write_point(point).map_err(las_problem)?;
         }
         writer.close().map_err(las_problem)?;

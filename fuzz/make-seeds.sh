@@ -30,6 +30,11 @@ done
 "$MVPCC" filter -q --sor-k 0 "$work/box.ply" $c/cloud_laz/box.laz
 "$MVPCC" filter -q --sor-k 0 "$work/box.ply" $c/cloud_xyz/box.xyz
 printf 'x,y,z\n1,2,3\n4,5,6\n7,8,9.5\n' > $c/cloud_xyz/header.xyz
+# Attributes LAS has no field for become extra bytes, described by their VLR.
+awk '/^end_header/ { print "property short reflectance"; print; body = 1; next }
+     body { print $0, NR % 50 - 25; next } { print }' "$work/box.ply" > "$work/extra.ply"
+"$MVPCC" filter -q --sor-k 0 "$work/extra.ply" $c/cloud_las/extra.las
+"$MVPCC" filter -q --sor-k 0 "$work/extra.ply" $c/cloud_laz/extra.laz
 
 # Meshes: a textured-less cube as OBJ + MTL (split by \n%%\n), PLY, glTF and GLB.
 python3 - $c <<'PY'

@@ -264,7 +264,11 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     for command in ["complete", "filter"] {
         mvpcc()
             .args([command, s(&input), s(&dir.path().join("done.ply"))])
-            .args(["--method", "mirror"].iter().filter(|_| command == "complete"))
+            .args(
+                ["--method", "mirror"]
+                    .iter()
+                    .filter(|_| command == "complete"),
+            )
             .assert()
             .success()
             .stderr(predicate::str::contains(

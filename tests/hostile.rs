@@ -131,6 +131,46 @@ fn the_point_limit_is_stated_and_can_be_lowered() {
     assert!(!out.exists());
 }
 
+/// Each extra-bytes field of a LAS file is a column of f64 once read, so a compressed file of
+/// megabytes could ask for tens of gigabytes: the columns count against the same memory the
+/// point limit stands for.
+#[test]
+fn extra_bytes_count_against_the_point_limit() {
+    let dir = TempDir::new().unwrap();
+    let n = 1000;
+    let cloud = PointCloud {
+        positions: (0..n).map(|i| [i as f64, 0.0, 1.0]).collect(),
+        attributes: (0..20)
+            .map(|k| mvpcc::core::cloud::Attribute {
+                name: format!("field{k}"),
+                kind: mvpcc::core::cloud::ScalarKind::U8,
+                values: vec![k as f64; n],
+            })
+            .collect(),
+        ..Default::default()
+    };
+    let input = dir.path().join("wide.laz");
+    write_cloud(&input, &cloud, None, Encoding::Binary).unwrap();
+    let out = dir.path().join("out.ply");
+    // 1000 points with 20 columns more take what 1000 · (72 + 160) / 72 ≈ 3,222 points do.
+    for (limit, ok) in [("3000", false), ("3300", true)] {
+        let assert = assert_cmd::Command::cargo_bin("mvpcc")
+            .unwrap()
+            .env("MVPCC_MAX_POINTS", limit)
+            .args(["filter", s(&input), s(&out)])
+            .assert();
+        if ok {
+            assert.success();
+        } else {
+            assert.failure().stderr(predicates::str::contains(
+                "wide.laz: its 1000 points with 20 extra-bytes fields take the memory of 3222 points, \
+                 above the 3000 one input may have",
+            ));
+        }
+        assert_eq!(out.exists(), ok, "limit {limit}");
+    }
+}
+
 #[test]
 fn a_las_file_claiming_a_billion_points() {
     let dir = TempDir::new().unwrap();

@@ -110,6 +110,16 @@ pub enum Problem {
         limit.saturating_mul(BYTES_PER_POINT) >> 30
     )]
     TooManyPoints { points: usize, limit: usize },
+    #[error(
+        "its {points} points with {fields} extra-bytes fields take the memory of {as_many} \
+         points, above the {limit} one input may have; raise {MAX_POINTS_VAR}"
+    )]
+    TooManyFields {
+        points: usize,
+        fields: usize,
+        as_many: usize,
+        limit: usize,
+    },
     #[error("{0}")]
     Malformed(String),
     #[error("output would overwrite the input file")]
@@ -125,7 +135,7 @@ pub enum Problem {
 /// The environment variable that raises (or lowers) [`max_points`].
 pub const MAX_POINTS_VAR: &str = "MVPCC_MAX_POINTS";
 const DEFAULT_MAX_POINTS: usize = 200_000_000;
-/// Memory a read point takes with colour and the LAS attributes (f64 each).
+/// Memory a read point takes with colour and the LAS point record's fields (f64 each).
 const BYTES_PER_POINT: usize = 72;
 
 /// The most points one input may have: 200 million (about 13 GiB once read) unless
@@ -143,6 +153,23 @@ pub(crate) fn check_points(points: usize) -> Result<(), Problem> {
     let limit = max_points();
     if points > limit {
         return Err(Problem::TooManyPoints { points, limit });
+    }
+    Ok(())
+}
+
+/// Refuses a cloud of `points` points with `fields` attribute columns beyond those
+/// [`BYTES_PER_POINT`] counts when they would take more memory than [`max_points`] points do: a
+/// compressed file can describe many times its size in such columns.
+pub(crate) fn check_fields(points: usize, fields: usize) -> Result<(), Problem> {
+    let as_many = points.saturating_mul(BYTES_PER_POINT + 8 * fields) / BYTES_PER_POINT;
+    let limit = max_points();
+    if as_many > limit {
+        return Err(Problem::TooManyFields {
+            points,
+            fields,
+            as_many,
+            limit,
+        });
     }
     Ok(())
 }

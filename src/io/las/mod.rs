@@ -5,7 +5,7 @@
 
 mod extra_bytes;
 
-use super::{check_points, Problem};
+use super::{check_fields, check_points, Problem};
 use crate::core::cloud::{Attribute, CrsRecord, PointCloud, Quantization, ScalarKind, SYNTHETIC};
 use crate::core::guard::guarded;
 use las::point::{Classification, Format};
@@ -285,8 +285,9 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     let mut positions = Vec::new();
     let mut colors16 = Vec::new();
     let mut fields = Columns::new();
-    let mut extra =
-        extra_bytes::Columns::new(extra_bytes::described(&header), &FIELDS.map(|f| f.0));
+    let described = extra_bytes::described(&header);
+    check_fields(declared, described.len())?;
+    let mut extra = extra_bytes::Columns::new(described, &FIELDS.map(|f| f.0));
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {

@@ -17,7 +17,8 @@
 #   --category LIST   what they are drawn from, NAME or NAME=WEIGHT each (prepare --category;
 #                     e.g. car,bus,truck,train,motorcycle=3 for more motorcycles) [prepare's]
 #   --init PATH|none  weights the leg starts from (train --init) [assets]
-#   --config NAME     model of a fresh run (--init none): a preset or a config file [cpu]
+#   --config NAME     model of a fresh run (--init none): builtin (the built-in model's shape,
+#                     as train's default), a preset or a config file [builtin]
 #   --size S          view side of the data and the model [128]
 #   --batch B         objects per step [16]
 #   --lr R            first-stage learning rate [5e-4]
@@ -50,7 +51,7 @@ profile_seconds=150
 objects=6000
 seed=$(date +%Y%m%d)
 init=assets
-config=cpu
+config=builtin
 size=128
 batch=16
 lr=5e-4

@@ -18,16 +18,27 @@ enum Role {
     Other,
 }
 
+/// Property names and what they hold, matched in any case (some writers name coordinates `X`).
+const ROLES: [(&str, Role); 12] = [
+    ("x", Role::Coordinate(0)),
+    ("y", Role::Coordinate(1)),
+    ("z", Role::Coordinate(2)),
+    ("red", Role::Color(0)),
+    ("r", Role::Color(0)),
+    ("diffuse_red", Role::Color(0)),
+    ("green", Role::Color(1)),
+    ("g", Role::Color(1)),
+    ("diffuse_green", Role::Color(1)),
+    ("blue", Role::Color(2)),
+    ("b", Role::Color(2)),
+    ("diffuse_blue", Role::Color(2)),
+];
+
 fn role(name: &str) -> Role {
-    match name {
-        "x" => Role::Coordinate(0),
-        "y" => Role::Coordinate(1),
-        "z" => Role::Coordinate(2),
-        "red" | "r" | "diffuse_red" => Role::Color(0),
-        "green" | "g" | "diffuse_green" => Role::Color(1),
-        "blue" | "b" | "diffuse_blue" => Role::Color(2),
-        _ => Role::Other,
-    }
+    ROLES
+        .iter()
+        .find(|(known, _)| known.eq_ignore_ascii_case(name))
+        .map_or(Role::Other, |&(_, role)| role)
 }
 
 pub(crate) fn scalar_value(p: &Property) -> Option<f64> {
@@ -261,11 +272,26 @@ type VertexLayout = (bool, Vec<(String, ScalarKind)>);
 /// The layout of `vertex_def`, refused without x, y and z.
 fn vertex_layout(vertex_def: &ElementDef) -> Result<VertexLayout, Problem> {
     let names: Vec<&String> = vertex_def.properties.keys().collect();
-    for axis in ["x", "y", "z"] {
-        if !names.iter().any(|n| n.as_str() == axis) {
-            return Err(Problem::Malformed(format!(
-                "vertex element has no '{axis}' property"
-            )));
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let named: Vec<&str> = names
+            .iter()
+            .filter(|n| role(n) == Role::Coordinate(k))
+            .map(|n| n.as_str())
+            .collect();
+        match named[..] {
+            [_] => {}
+            [] => {
+                return Err(Problem::Malformed(format!(
+                    "vertex element has no '{axis}' property"
+                )))
+            }
+            _ => {
+                return Err(Problem::Malformed(format!(
+                    "vertex element has {} properties for '{axis}' ({})",
+                    named.len(),
+                    named.join(", ")
+                )))
+            }
         }
     }
     let has_color = (0..3).all(|c| names.iter().any(|n| role(n) == Role::Color(c)));
@@ -404,6 +430,29 @@ mod tests {
         let path = dir.path().join("t.ply");
         std::fs::write(&path, bytes).unwrap();
         read(&path)
+    }
+
+    /// `property double X` was refused ("no 'x' property"); a vertex with both `x` and `X`
+    /// is ambiguous and says so.
+    #[test]
+    fn coordinates_and_colours_are_named_in_any_case() {
+        let header = |names: &str| {
+            let properties: String = names
+                .split(' ')
+                .map(|n| match n.len() {
+                    1 => format!("property double {n}\n"),
+                    _ => format!("property uchar {n}\n"),
+                })
+                .collect();
+            format!("ply\nformat ascii 1.0\nelement vertex 1\n{properties}end_header\n")
+        };
+        let c = read_str(format!("{}1 2 3 4 5 6\n", header("X Y Z Red Green Blue")).as_bytes());
+        let c = c.unwrap();
+        assert_eq!(c.positions, [[1.0, 2.0, 3.0]]);
+        assert_eq!(c.colors.as_deref(), Some(&[[4, 5, 6]][..]));
+        let both = read_str(format!("{}1 2 3 4\n", header("x y z X")).as_bytes());
+        let error = both.unwrap_err().to_string();
+        assert!(error.contains("2 properties for 'x' (x, X)"), "{error}");
     }
 
     #[test]

@@ -61,14 +61,14 @@ impl Layout {
     fn by_count(n: usize, pts: bool, colors_at_4: bool) -> Layout {
         let first_color = match n {
             4 => return Layout::named(&["x", "y", "z", "intensity"]),
-            7 if pts => 4,
-            _ if n >= 6 && colors_at_4 => 3,
-            _ => usize::MAX,
+            7 if pts => Some(4),
+            _ if n >= 6 && colors_at_4 => Some(3),
+            _ => None,
         };
-        let columns = (0..n).map(|k| match k {
-            0..=2 => Column::Position(k),
-            _ if (first_color..first_color + 3).contains(&k) => Column::Color(k - first_color),
-            3 if pts && n == 7 => Column::Attribute("intensity".into()),
+        let columns = (0..n).map(|k| match (k, first_color) {
+            (0..=2, _) => Column::Position(k),
+            (_, Some(first)) if (first..first + 3).contains(&k) => Column::Color(k - first),
+            (3, _) if pts && n == 7 => Column::Attribute("intensity".into()),
             _ => Column::Attribute(format!("column_{}", k + 1)),
         });
         Layout(columns.collect())

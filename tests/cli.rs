@@ -453,6 +453,38 @@ fn missing_folders_and_lists_are_said_in_the_readers_words() {
     );
 }
 
+/// `a.las` and `a.ply` completed with `--out-format ply` were both written to `out/a.ply`, the
+/// second over the first, and the batch said "2 of 2 files completed"; so were their
+/// `--save-views` folders. Refused before anything is written.
+#[test]
+fn a_batch_never_writes_two_inputs_to_one_output() {
+    let dir = TempDir::new().unwrap();
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/example/car_partial.ply");
+    let cloud = read_cloud(&example, None).unwrap().cloud;
+    for name in ["a.ply", "a.las"] {
+        write_cloud(&inputs.join(name), &cloud, None, Encoding::Binary).unwrap();
+    }
+    let out = dir.path().join("out");
+    let views = dir.path().join("views");
+    let batch = [
+        "complete",
+        "--input-dir",
+        s(&inputs),
+        "--output-dir",
+        s(&out),
+    ];
+    let mirror = ["--method", "mirror"];
+    let collision = "would both be written to";
+    let ply = [&batch[..], &mirror, &["--out-format", "ply"]].concat();
+    fails(&ply, "a.ply", collision, &out);
+    let saved = [&batch[..], &mirror, &["--save-views", s(&views)]].concat();
+    fails(&saved, "views", collision, &views);
+    mvpcc().args(batch).args(mirror).assert().success();
+    assert!(out.join("a.ply").exists() && out.join("a.las").exists());
+}
+
 #[test]
 fn bad_inputs_fail_cleanly() {
     let dir = TempDir::new().unwrap();

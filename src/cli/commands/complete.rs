@@ -562,6 +562,35 @@ fn batch_output(output_dir: &Path, relative: &Path, args: &CompleteArgs) -> Path
     output
 }
 
+/// Refuses a batch in which two inputs would be written to the same output or views folder
+/// (`a.las` and `a.ply` with `--out-format ply`, or with `--save-views`): the later one would
+/// replace the earlier one's without a word.
+fn check_distinct(
+    root: &Path,
+    files: &[PathBuf],
+    output_dir: &Path,
+    args: &CompleteArgs,
+) -> anyhow::Result<()> {
+    let mut written: BTreeMap<PathBuf, &Path> = BTreeMap::new();
+    for relative in files {
+        let views = args
+            .save_views
+            .as_ref()
+            .map(|d| d.join(relative.with_extension("")));
+        for target in std::iter::once(batch_output(output_dir, relative, args)).chain(views) {
+            if let Some(first) = written.insert(target.clone(), relative) {
+                bail!(
+                    "{} and {} would both be written to {}; rename one or complete them apart",
+                    root.join(first).display(),
+                    root.join(relative).display(),
+                    target.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Completes, skips or fails one file of a batch.
 fn batch_entry(
     root: &Path,
@@ -602,6 +631,7 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
     let root = args.input_dir.clone().unwrap_or_else(|| PathBuf::from("."));
     super::check_out_dir(output_dir)?;
     let files = batch_files(&root, output_dir, args)?;
+    check_distinct(&root, &files, output_dir, args)?;
     std::fs::create_dir_all(output_dir)
         .with_context(|| format!("{}: cannot create", output_dir.display()))?;
     let bar = progress(files.len(), "completing", log);

@@ -483,6 +483,13 @@ fn a_batch_never_writes_two_inputs_to_one_output() {
     fails(&saved, "views", collision, &views);
     mvpcc().args(batch).args(mirror).assert().success();
     assert!(out.join("a.ply").exists() && out.join("a.las").exists());
+    mvpcc()
+        .args(batch)
+        .args(mirror)
+        .args(["--include", "a.ply"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("1 of 1 file completed into"));
 }
 
 #[test]

@@ -1,6 +1,7 @@
 use super::project::default_up;
 use super::{non_finite_warning, progress, Log};
 use crate::cli::args::CompleteArgs;
+use crate::cli::count;
 use crate::cli::streams::{say, tell};
 use anyhow::{anyhow, bail, Context};
 use burn::tensor::Device;
@@ -657,9 +658,9 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
     let results: Vec<BatchEntry> = results.into_iter().map(|(_, e)| e).collect();
     let report = summarize(args, results, log);
     log.info(format!(
-        "{} of {} files completed into {}{}, {} skipped, {} failed",
+        "{} of {} completed into {}{}, {} skipped, {} failed",
         report.completed,
-        report.files,
+        count(report.files, "file"),
         output_dir.display(),
         report
             .shard
@@ -672,7 +673,11 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
         say(serde_json::to_string_pretty(&report)?)?;
     }
     if report.failed > 0 {
-        bail!("{} of {} files failed", report.failed, report.files);
+        bail!(
+            "{} of {} failed",
+            report.failed,
+            count(report.files, "file")
+        );
     }
     Ok(())
 }

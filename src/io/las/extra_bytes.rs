@@ -190,32 +190,42 @@ pub(super) fn described(header: &las::Header) -> Vec<Field> {
             if at + raw.size() > room {
                 return fields;
             }
-            let slot =
-                |base: usize| -> [u8; 8] { d[base + 8 * j..base + 8 * j + 8].try_into().unwrap() };
-            let given =
-                |bit: u8, base: usize| (options & bit != 0).then(|| f64::from_le_bytes(slot(base)));
-            let scale = given(HAS_SCALE, SCALE).filter(|s| s.is_finite() && *s != 0.0);
-            let offset = given(HAS_OFFSET, OFFSET).filter(|o| o.is_finite());
-            fields.push(Field {
-                stored: StoredField {
-                    name: if count == 1 {
-                        name.clone()
-                    } else {
-                        format!("{name}_{j}")
-                    },
-                    data_type: raw as u8,
-                    scale: scale.unwrap_or(1.0),
-                    offset: offset.unwrap_or(0.0),
-                    no_data: (options & HAS_NO_DATA != 0).then(|| slot(NO_DATA)),
-                    description: c_string(&d[TEXT..TEXT + TEXT_LEN]),
-                },
-                raw,
-                at,
-            });
+            let name = if count == 1 {
+                name.clone()
+            } else {
+                format!("{name}_{j}")
+            };
+            fields.push(element(d, raw, name, j, at));
             at += raw.size();
         }
     }
     fields
+}
+
+/// Element `j` of the field description `d` (0 unless it describes an array), stored as `raw`
+/// from byte `at` of a point's extra bytes.
+fn element(d: &[u8], raw: Raw, name: String, j: usize, at: usize) -> Field {
+    let options = d[3];
+    let slot = |base: usize| -> [u8; 8] {
+        d[base + 8 * j..base + 8 * j + 8]
+            .try_into()
+            .expect("eight bytes")
+    };
+    let given = |bit: u8, base: usize| (options & bit != 0).then(|| f64::from_le_bytes(slot(base)));
+    let scale = given(HAS_SCALE, SCALE).filter(|s| s.is_finite() && *s != 0.0);
+    let offset = given(HAS_OFFSET, OFFSET).filter(|o| o.is_finite());
+    Field {
+        stored: StoredField {
+            name,
+            data_type: raw as u8,
+            scale: scale.unwrap_or(1.0),
+            offset: offset.unwrap_or(0.0),
+            no_data: (options & HAS_NO_DATA != 0).then(|| slot(NO_DATA)),
+            description: c_string(&d[TEXT..TEXT + TEXT_LEN]),
+        },
+        raw,
+        at,
+    }
 }
 
 /// A description's name as an attribute name: PLY and PCD headers separate names by spaces,
@@ -245,8 +255,8 @@ fn c_string(bytes: &[u8]) -> String {
     String::from_utf8_lossy(&bytes[..end]).into_owned()
 }
 
-/// The attributes `fields` hold for `points` points: each field's column, named apart from
-/// `taken` (the point format's own fields) and from each other.
+/// The values of `fields` read so far, a column each, the fields named apart from `taken` (the
+/// point format's own fields) and from each other.
 pub(super) struct Columns {
     fields: Vec<Field>,
     values: Vec<Vec<f64>>,

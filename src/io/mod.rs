@@ -718,6 +718,88 @@ mod tests {
         }
     }
 
+    /// LAS 1.4's formats keep the overlap flag apart from the class byte, in which 12 is an
+    /// ordinary (reserved) code: the las crate reads a byte of 12 as class 1, so a file written
+    /// elsewhere lost its class 12, and the flag of a classified point was dropped.
+    #[test]
+    fn las_1_4_keeps_class_12_and_the_overlap_flag_apart() {
+        use ::las::point::Classification;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("elsewhere.las");
+        let mut builder = ::las::Builder::from((1, 4));
+        builder.point_format = ::las::point::Format::new(6).unwrap();
+        let header = builder.into_header().unwrap();
+        let mut writer = ::las::Writer::from_path(&path, header).unwrap();
+        let points = [
+            (Classification::Reserved(12), false),
+            (Classification::Ground, true),
+            (Classification::Unclassified, true),
+            (Classification::Unclassified, false),
+        ];
+        for (k, (classification, is_overlap)) in points.into_iter().enumerate() {
+            let point = ::las::Point {
+                x: k as f64,
+                classification,
+                is_overlap,
+                gps_time: Some(0.0),
+                ..Default::default()
+            };
+            writer.write_point(point).unwrap();
+        }
+        writer.close().unwrap();
+        let cloud = read_cloud(&path, None).unwrap().cloud;
+        let values = |c: &PointCloud, name| c.attribute(name).map(|a| a.values.clone());
+        assert_eq!(
+            values(&cloud, "classification"),
+            Some(vec![12.0, 2.0, 1.0, 1.0])
+        );
+        assert_eq!(values(&cloud, "overlap"), Some(vec![0.0, 1.0, 1.0, 0.0]));
+        for ext in ["las", "laz"] {
+            let (back, version, _) = las_round_trip(ext, &cloud);
+            assert_eq!(version, (1, 4));
+            for name in ["classification", "overlap"] {
+                assert_eq!(values(&back, name), values(&cloud, name), "{name} {ext}");
+            }
+        }
+    }
+
+    /// Multi-scanner MLS systems number their scanners in LAS 1.4's scanner channel, and
+    /// four-band ones add near infrared (format 8): both were dropped on reading. A channel
+    /// needs LAS 1.4 (format 6/7), NIR format 8, whose colour is written as black for a cloud
+    /// without one.
+    #[test]
+    fn las_keeps_the_scanner_channel_and_near_infrared() {
+        let n = colored_cloud(true).len();
+        let column = |name: &str, kind, value: &dyn Fn(usize) -> f64| Attribute {
+            name: name.into(),
+            kind,
+            values: (0..n).map(value).collect(),
+        };
+        let channel = column("scanner_channel", ScalarKind::U8, &|i| (i % 4) as f64);
+        let nir = column("nir", ScalarKind::U16, &|i| (i * 211 % 65536) as f64);
+        let cases = [
+            (vec![channel.clone()], true, 7),
+            (vec![nir.clone()], true, 8),
+            (vec![channel, nir], false, 8),
+        ];
+        for (extra, colored, format) in cases {
+            let mut cloud = colored_cloud(true);
+            if !colored {
+                cloud.colors = None;
+            }
+            cloud.attributes.extend(extra.iter().cloned());
+            for ext in ["las", "laz"] {
+                let (back, version, written_format) = las_round_trip(ext, &cloud);
+                assert_eq!((version, written_format), ((1, 4), format), "{ext}");
+                for want in &extra {
+                    assert_eq!(back.attribute(&want.name), Some(want), "{ext}");
+                }
+                let black = vec![[0u8; 3]; n];
+                assert_eq!(back.colors, cloud.colors.clone().or(Some(black)));
+            }
+        }
+    }
+
     /// The CRS records of a LAS input were dropped, so a georeferenced scan came out of
     /// `complete` with no coordinate system. GeoTIFF keys stay in LAS 1.2; a WKT too long for a
     /// VLR goes into an EVLR of LAS 1.4.

@@ -295,13 +295,14 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         if data.is_empty() {
             break;
         }
-        for p in data.points() {
+        let records = data.raw_bytes().chunks_exact(data.record_len());
+        for (p, record) in data.points().zip(records) {
             let p = p.map_err(problem)?;
             positions.push([p.x, p.y, p.z]);
             if let Some(c) = p.color {
                 colors16.push([c.red, c.green, c.blue]);
             }
-            fields.push(field_values(&p));
+            fields.push(field_values(&p, record, data.format().is_extended));
             extra.push(&p.extra_bytes);
         }
     }
@@ -377,7 +378,7 @@ fn eight_bit(colors16: &[[u16; 3]]) -> Vec<[u8; 3]> {
 
 /// The point record's fields kept as attributes, with their storage kinds, in the order the
 /// cloud holds them ([`field_values`] reads them from a point, [`write`] back).
-const FIELDS: [(&str, ScalarKind); 9] = [
+const FIELDS: [(&str, ScalarKind); 12] = [
     ("intensity", ScalarKind::U16),
     ("classification", ScalarKind::U8),
     (SYNTHETIC, ScalarKind::U8),
@@ -387,13 +388,24 @@ const FIELDS: [(&str, ScalarKind); 9] = [
     ("user_data", ScalarKind::U8),
     ("point_source_id", ScalarKind::U16),
     ("gps_time", ScalarKind::F64),
+    ("scanner_channel", ScalarKind::U8),
+    ("nir", ScalarKind::U16),
+    ("overlap", ScalarKind::U8),
 ];
 
-/// One point's [`FIELDS`]; the scan angle in degrees, GPS time 0 where the format has none.
-fn field_values(p: &Point) -> [f64; 9] {
+/// One point's [`FIELDS`] from the point and its `record`'s bytes; the scan angle in degrees,
+/// GPS time and NIR 0 where the format has none. LAS 1.4's formats (`extended`) keep the
+/// overlap flag apart from the class, and their class byte is read as it is: the las crate
+/// reads a byte of 12 (a reserved code there) as class 1.
+fn field_values(p: &Point, record: &[u8], extended: bool) -> [f64; 12] {
+    let (class, overlap) = if extended {
+        (record[EXTENDED_CLASS_AT], p.is_overlap)
+    } else {
+        (class_code(p), false)
+    };
     [
         p.intensity as f64,
-        class_code(p) as f64,
+        class as f64,
         if p.is_synthetic { 1.0 } else { 0.0 },
         p.return_number as f64,
         p.number_of_returns as f64,
@@ -401,6 +413,9 @@ fn field_values(p: &Point) -> [f64; 9] {
         p.user_data as f64,
         p.point_source_id as f64,
         p.gps_time.unwrap_or(0.0),
+        p.scanner_channel as f64,
+        p.nir.map_or(0.0, f64::from),
+        if overlap { 1.0 } else { 0.0 },
     ]
 }
 
@@ -411,7 +426,7 @@ fn field_values(p: &Point) -> [f64; 9] {
 /// output, and takes no memory for them while it is read: at the 200-million-point input
 /// limit each column is 1.6 GB.
 struct Columns {
-    columns: [Option<Vec<f64>>; 9],
+    columns: [Option<Vec<f64>>; 12],
     points: usize,
 }
 
@@ -424,7 +439,7 @@ impl Columns {
         }
     }
 
-    fn push(&mut self, values: [f64; 9]) {
+    fn push(&mut self, values: [f64; 12]) {
         for (column, value) in self.columns.iter_mut().zip(values) {
             match column {
                 Some(column) => column.push(value),
@@ -476,8 +491,9 @@ fn quantization_for(cloud: &PointCloud) -> Quantization {
     }
 }
 
-/// A point's classification as LAS 1.0–1.3 code it: the las crate reads code 12 ("overlap
-/// points") as class 1 with the overlap flag, which LAS 1.4's formats keep apart.
+/// A point's classification as LAS 1.0–1.3 code it (point formats 0–5): the las crate reads
+/// code 12 ("overlap points") as class 1 with the overlap flag, which LAS 1.4's formats keep
+/// apart.
 fn class_code(p: &Point) -> u8 {
     if p.is_overlap && p.classification == Classification::Unclassified {
         OVERLAP_CLASS
@@ -486,15 +502,28 @@ fn class_code(p: &Point) -> u8 {
     }
 }
 
-/// [`class_code`] undone for writing; codes outside a byte are clamped into it.
-fn class_and_overlap(code: f64) -> (Classification, bool) {
+/// [`class_code`] undone for writing formats 0–5: code 12, and the overlap flag of an
+/// unclassified point, become class 1 with the flag, which the las crate writes as 12; codes
+/// outside a byte are clamped into it.
+fn legacy_class(code: f64, overlap: bool) -> (Classification, bool) {
     match Classification::new(code as u8) {
-        Ok(class) => (class, false),
+        Ok(class) => (class, overlap && class == Classification::Unclassified),
         Err(_) => (Classification::Unclassified, true),
     }
 }
 
+/// A class byte of formats 6–10 as the las crate writes it: 12 is reserved there, and only
+/// `Reserved` carries it.
+fn extended_class(code: f64) -> Classification {
+    let code = code as u8;
+    Classification::new(code).unwrap_or(Classification::Reserved(code))
+}
+
 const OVERLAP_CLASS: u8 = 12;
+
+/// Where the class byte lies in a record of formats 6–10: after the coordinates, intensity,
+/// returns and flags.
+const EXTENDED_CLASS_AT: usize = 16;
 
 /// The largest classification code point formats 0–5 hold (five bits); LAS 1.4's formats 6–10
 /// hold a byte, and MLS data uses codes above 31 for its own classes.
@@ -503,16 +532,23 @@ const MAX_LEGACY_CLASS: f64 = 31.0;
 /// The most returns of a pulse point formats 0–5 count (three bits); formats 6–10 count 15.
 const MAX_LEGACY_RETURNS: f64 = 7.0;
 
+/// The highest scanner channel formats 6–10 number (two bits; the older formats have none):
+/// multi-scanner MLS systems tell their scanners apart by it.
+const MAX_CHANNEL: u8 = 3;
+
 /// LAS 1.2 with point format 0 (1 with GPS time, 2 with colour, 3 with both), which every reader
 /// takes; LAS 1.4 with format 6 (or 7 with colour; both with GPS time) where a classification
-/// code, a return number or a scan angle needs more than the older formats give it.
-fn version_and_format(color: bool, gps_time: bool, wide: bool) -> (Builder, Format) {
-    let (version, number) = if wide {
+/// code, a return number, a scan angle or a scanner channel needs more than the older formats
+/// give it, and format 8 (colour and NIR) for a near-infrared channel.
+fn version_and_format(color: bool, gps_time: bool, wide: bool, nir: bool) -> (Builder, Format) {
+    let (version, number) = if nir {
+        ((1, 4), 8)
+    } else if wide {
         ((1, 4), 6 + u8::from(color))
     } else {
         ((1, 2), u8::from(gps_time) + 2 * u8::from(color))
     };
-    let format = Format::new(number).expect("formats 0–3, 6 and 7 exist");
+    let format = Format::new(number).expect("formats 0–3 and 6–8 exist");
     (Builder::from(version), format)
 }
 
@@ -545,12 +581,15 @@ fn header_for(
         || exceeds(cloud, "return_number", MAX_LEGACY_RETURNS)
         || exceeds(cloud, "number_of_returns", MAX_LEGACY_RETURNS)
         || finer_than_degrees(cloud)
+        || exceeds(cloud, "scanner_channel", 0.0)
+        || exceeds(cloud, "overlap", 0.0)
         || cloud
             .crs
             .iter()
             .any(|r| r.data.len() > usize::from(u16::MAX));
     let gps_time = cloud.attribute("gps_time").is_some();
-    let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide);
+    let nir = cloud.attribute("nir").is_some();
+    let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide, nir);
     format.is_compressed = compressed;
     format.extra_bytes = u16::try_from(format.len() as usize + extra.len())
         .map(|_| extra.len() as u16)
@@ -591,14 +630,18 @@ fn scan_angle(degrees: f64) -> f32 {
 /// (0 where the cloud has none), each cast into the record's field.
 fn record(
     cloud: &PointCloud,
-    columns: &[Option<&Attribute>; 9],
+    columns: &[Option<&Attribute>; 12],
     i: usize,
     format: &Format,
 ) -> Point {
-    let [intensity, class, synthetic, ret, returns, angle, user, source, time] =
+    let [intensity, class, synthetic, ret, returns, angle, user, source, time, channel, nir, overlap] =
         columns.map(|c| c.map_or(0.0, |a| a.values[i]));
     let max_returns = if format.is_extended { 15 } else { 7 };
-    let (classification, is_overlap) = class_and_overlap(class);
+    let (classification, is_overlap) = if format.is_extended {
+        (extended_class(class), overlap != 0.0)
+    } else {
+        legacy_class(class, overlap != 0.0)
+    };
     let [x, y, z] = cloud.positions[i];
     Point {
         x,
@@ -614,10 +657,18 @@ fn record(
         user_data: user as u8,
         point_source_id: source as u16,
         gps_time: format.has_gps_time.then_some(time),
-        color: cloud.colors.as_ref().map(|c| Color {
-            red: c[i][0] as u16 * 257,
-            green: c[i][1] as u16 * 257,
-            blue: c[i][2] as u16 * 257,
+        scanner_channel: if format.is_extended {
+            (channel as u8).min(MAX_CHANNEL)
+        } else {
+            0
+        },
+        nir: format.has_nir.then_some(nir as u16),
+        color: format.has_color.then(|| {
+            cloud.colors.as_ref().map_or(Color::default(), |c| Color {
+                red: c[i][0] as u16 * 257,
+                green: c[i][1] as u16 * 257,
+                blue: c[i][2] as u16 * 257,
+            })
         }),
         ..Default::default()
     }

@@ -218,8 +218,9 @@ fn timings_table_and_las_synthetic_flag() {
 }
 
 /// A georeferenced LAS scan keeps what it was read with: the coordinate system, the scale and
-/// offset, its points' GPS times and its extra bytes, stored as they were (the added points
-/// take their nearest measured point's values).
+/// offset, what its header says of the points (the GPS time type), its points' GPS times and
+/// its extra bytes, stored as they were (the added points take their nearest measured point's
+/// values).
 #[test]
 fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     let dir = TempDir::new().unwrap();
@@ -243,6 +244,11 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
         description: "OGC WKT".into(),
         data: b"PROJCS[\"ETRS89 / UTM zone 33N\"]\0".to_vec(),
     }];
+    cloud.las_source = mvpcc::core::cloud::LasSource {
+        standard_gps_time: true,
+        file_source_id: 3,
+        system_identifier: "MLS van".into(),
+    };
     cloud.extra_bytes = vec![mvpcc::core::cloud::StoredField {
         name: "Reflectance".into(),
         data_type: 4,
@@ -260,6 +266,7 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     assert_eq!(done.quantization, read.quantization);
     assert_eq!(&done.positions[..n], &read.positions[..]);
     assert_eq!(done.extra_bytes, cloud.extra_bytes);
+    assert_eq!(done.las_source, cloud.las_source);
     // A PLY output has no place for the coordinate system, and says so.
     for command in ["complete", "filter"] {
         mvpcc()

@@ -54,6 +54,19 @@ pub struct CrsRecord {
     pub data: Vec<u8>,
 }
 
+/// What a LAS input's header says of its points besides their coordinate system, kept so that
+/// a LAS output says the same; the defaults for other inputs.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LasSource {
+    /// Whether `gps_time` counts adjusted standard GPS time (GPS seconds − 10⁹) rather than
+    /// seconds of the GPS week: the header's global encoding, bit 0.
+    pub standard_gps_time: bool,
+    /// The file source ID: the flight line or trajectory the points come from.
+    pub file_source_id: u16,
+    /// The system identifier: the hardware or process that produced the points.
+    pub system_identifier: String,
+}
+
 /// How a LAS input stored one of its extra-bytes fields (the attribute of the same name), kept
 /// so that a LAS output stores it alike: a scaled integer stays a scaled integer of its width.
 #[derive(Debug, Clone, PartialEq)]
@@ -82,6 +95,7 @@ pub struct PointCloud {
     pub crs: Vec<CrsRecord>,
     /// How a LAS input stored the attributes it held as extra bytes; empty otherwise.
     pub extra_bytes: Vec<StoredField>,
+    pub las_source: LasSource,
 }
 
 /// Axis-aligned bounding box.
@@ -170,6 +184,7 @@ impl PointCloud {
             quantization: self.quantization,
             crs: self.crs.clone(),
             extra_bytes: self.extra_bytes.clone(),
+            las_source: self.las_source.clone(),
         }
     }
 
@@ -255,6 +270,7 @@ mod tests {
             quantization: None,
             crs: Vec::new(),
             extra_bytes: Vec::new(),
+            las_source: Default::default(),
         };
         let other = PointCloud {
             positions: vec![[1.0; 3], [2.0; 3]],
@@ -263,6 +279,7 @@ mod tests {
             quantization: None,
             crs: Vec::new(),
             extra_bytes: Vec::new(),
+            las_source: Default::default(),
         };
         cloud.append(other.clone());
         assert_eq!(cloud.positions, [[0.0; 3], [1.0; 3], [2.0; 3]]);
@@ -293,6 +310,7 @@ mod tests {
             quantization: None,
             crs: Vec::new(),
             extra_bytes: Vec::new(),
+            las_source: Default::default(),
         }
     }
 

@@ -532,6 +532,7 @@ mod tests {
             quantization: None,
             crs: Vec::new(),
             extra_bytes: Vec::new(),
+            las_source: Default::default(),
         }
     }
 
@@ -761,6 +762,36 @@ mod tests {
                 assert_eq!(values(&back, name), values(&cloud, name), "{name} {ext}");
             }
         }
+    }
+
+    /// The header's GPS time type says what `gps_time` counts (week seconds or adjusted
+    /// standard time); it was written as week seconds whatever the input said, so an MLS scan's
+    /// standard times changed meaning. It, the file source ID (the trajectory) and the system
+    /// identifier are kept.
+    #[test]
+    fn las_keeps_what_its_header_says_of_the_points() {
+        let source = crate::core::cloud::LasSource {
+            standard_gps_time: true,
+            file_source_id: 7,
+            system_identifier: "RIEGL VMX-2HA".into(),
+        };
+        let mut cloud = PointCloud {
+            las_source: source.clone(),
+            ..colored_cloud(true)
+        };
+        let times = (0..cloud.len()).map(|i| 3.2e8 + i as f64).collect();
+        cloud.attributes.push(Attribute {
+            name: "gps_time".into(),
+            kind: ScalarKind::F64,
+            values: times,
+        });
+        for ext in ["las", "laz"] {
+            let (back, _, _) = las_round_trip(ext, &cloud);
+            assert_eq!(back.las_source, source, "{ext}");
+        }
+        let plain = las_round_trip("las", &colored_cloud(true)).0;
+        assert!(!plain.las_source.standard_gps_time);
+        assert_eq!(plain.las_source.file_source_id, 0);
     }
 
     /// Multi-scanner MLS systems number their scanners in LAS 1.4's scanner channel, and

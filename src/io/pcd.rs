@@ -278,6 +278,7 @@ impl Collector {
                 quantization: None,
                 crs: Vec::new(),
                 extra_bytes: Vec::new(),
+                las_source: Default::default(),
             },
             attributes,
         }

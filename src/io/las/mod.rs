@@ -6,7 +6,9 @@
 mod extra_bytes;
 
 use super::{check_fields, check_points, Problem};
-use crate::core::cloud::{Attribute, CrsRecord, PointCloud, Quantization, ScalarKind, SYNTHETIC};
+use crate::core::cloud::{
+    Attribute, CrsRecord, LasSource, PointCloud, Quantization, ScalarKind, SYNTHETIC,
+};
 use crate::core::guard::guarded;
 use las::point::{Classification, Format};
 use las::{Builder, Color, Point, Transform, Vector, Vlr, Writer};
@@ -321,6 +323,11 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         quantization: Some(quantization),
         crs: crs_records(&header),
         extra_bytes,
+        las_source: LasSource {
+            standard_gps_time: header.gps_time_type().is_standard(),
+            file_source_id: header.file_source_id(),
+            system_identifier: header.system_identifier().to_string(),
+        },
     })
 }
 
@@ -355,6 +362,17 @@ fn add_crs(builder: &mut Builder, crs: &[CrsRecord]) {
         } else {
             builder.vlrs.push(vlr);
         }
+    }
+}
+
+/// The input's GPS time type, file source ID and system identifier, where it had them.
+fn add_source(builder: &mut Builder, source: &LasSource) {
+    if source.standard_gps_time {
+        builder.gps_time_type = las::GpsTimeType::Standard;
+    }
+    builder.file_source_id = source.file_source_id;
+    if !source.system_identifier.is_empty() {
+        builder.system_identifier = source.system_identifier.clone();
     }
 }
 
@@ -603,6 +621,7 @@ fn header_for(
     builder.point_format = format;
     builder.vlrs.extend(extra.vlr());
     builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));
+    add_source(&mut builder, &cloud.las_source);
     add_crs(&mut builder, &cloud.crs);
     let axis = |k: usize| Transform {
         scale: q.scale[k],

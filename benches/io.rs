@@ -16,6 +16,8 @@ fn io(c: &mut Criterion) {
         ("ply", Encoding::Ascii),
         ("pcd", Encoding::Binary),
         ("xyz", Encoding::Ascii),
+        ("las", Encoding::Binary),
+        ("laz", Encoding::Binary),
     ] {
         let path = dir.path().join(format!("car-{encoding:?}.{name}"));
         write_cloud(&path, &cloud, None, encoding).unwrap();

@@ -139,7 +139,13 @@ fn table(text: &str) -> Result<Table, Problem> {
             };
             return Err(at(format!("{values}, expected at least x y z")));
         }
-        let columns = columns.get_or_insert_with(|| vec![Vec::new(); n]);
+        // Sized once for every line that is left, so that no column is copied as it grows.
+        let columns = columns.get_or_insert_with(|| {
+            let lines = text.bytes().filter(|&b| b == b'\n').count() + 1 - line_no;
+            (0..n)
+                .map(|_| Vec::with_capacity(lines.min(limit)))
+                .collect()
+        });
         if columns.len() != n {
             let c = columns.len();
             return Err(at(format!("{n} values where earlier lines have {c}")));
@@ -199,8 +205,7 @@ fn looks_like_colors(columns: &[Vec<f64>]) -> bool {
 fn cloud(columns: Vec<Vec<f64>>, layout: &Layout) -> PointCloud {
     let points = columns.first().map_or(0, Vec::len);
     let mut positions = vec![[0.0; 3]; points];
-    let has_colors = layout.0.iter().any(|c| matches!(c, Column::Color(_)));
-    let mut colors = vec![[0.0; 3]; if has_colors { points } else { 0 }];
+    let mut rgb: [Vec<f64>; 3] = Default::default();
     let mut attributes = Vec::new();
     for (values, what) in columns.into_iter().zip(&layout.0) {
         match what {
@@ -211,13 +216,7 @@ fn cloud(columns: Vec<Vec<f64>>, layout: &Layout) -> PointCloud {
                     .zip(values)
                     .for_each(|(p, v)| p[axis] = v);
             }
-            Column::Color(channel) => {
-                let channel = *channel;
-                colors
-                    .iter_mut()
-                    .zip(values)
-                    .for_each(|(c, v)| c[channel] = v);
-            }
+            Column::Color(channel) => rgb[*channel] = values,
             Column::Attribute(name) => {
                 let (kind, values) = typed(values);
                 attributes.push(Attribute {
@@ -228,9 +227,10 @@ fn cloud(columns: Vec<Vec<f64>>, layout: &Layout) -> PointCloud {
             }
         }
     }
+    let has_colors = layout.0.iter().any(|c| matches!(c, Column::Color(_)));
     PointCloud {
         positions,
-        colors: has_colors.then(|| to_bytes(&colors)),
+        colors: has_colors.then(|| to_bytes(&rgb)),
         attributes,
         ..Default::default()
     }
@@ -289,13 +289,13 @@ fn parse_values<'a>(line: &'a str, values: &mut Vec<f64>) -> Result<(), &'a str>
 }
 
 /// Colours are 0–255, unless every value lies in [0, 1] and one is fractional.
-fn to_bytes(colors: &[[f64; 3]]) -> Vec<[u8; 3]> {
-    let unit = colors.iter().flatten().all(|v| (0.0..=1.0).contains(v))
-        && colors.iter().flatten().any(|v| v.fract() != 0.0);
+fn to_bytes(rgb: &[Vec<f64>; 3]) -> Vec<[u8; 3]> {
+    let values = || rgb.iter().flatten();
+    let unit = values().all(|v| (0.0..=1.0).contains(v)) && values().any(|v| v.fract() != 0.0);
     let scale = if unit { 255.0 } else { 1.0 };
-    colors
-        .iter()
-        .map(|c| c.map(|v| (v * scale).round().clamp(0.0, 255.0) as u8))
+    let byte = |v: f64| (v * scale).round().clamp(0.0, 255.0) as u8;
+    (0..rgb[0].len())
+        .map(|i| [byte(rgb[0][i]), byte(rgb[1][i]), byte(rgb[2][i])])
         .collect()
 }
 

@@ -96,6 +96,10 @@ pub struct PointCloud {
     /// How a LAS input stored the attributes it held as extra bytes; empty otherwise.
     pub extra_bytes: Vec<StoredField>,
     pub las_source: LasSource,
+    /// The sensor's pose a PCD input declared (`VIEWPOINT`: the translation, then the rotation
+    /// as a quaternion w x y z), kept so that a PCD output declares it; none where it was the
+    /// identity or there was none, and for normalized clouds.
+    pub viewpoint: Option<[f64; 7]>,
 }
 
 /// Axis-aligned bounding box.
@@ -185,6 +189,7 @@ impl PointCloud {
             crs: self.crs.clone(),
             extra_bytes: self.extra_bytes.clone(),
             las_source: self.las_source.clone(),
+            viewpoint: self.viewpoint,
         }
     }
 
@@ -271,6 +276,7 @@ mod tests {
             crs: Vec::new(),
             extra_bytes: Vec::new(),
             las_source: Default::default(),
+            viewpoint: None,
         };
         let other = PointCloud {
             positions: vec![[1.0; 3], [2.0; 3]],
@@ -280,6 +286,7 @@ mod tests {
             crs: Vec::new(),
             extra_bytes: Vec::new(),
             las_source: Default::default(),
+            viewpoint: None,
         };
         cloud.append(other.clone());
         assert_eq!(cloud.positions, [[0.0; 3], [1.0; 3], [2.0; 3]]);
@@ -311,6 +318,7 @@ mod tests {
             crs: Vec::new(),
             extra_bytes: Vec::new(),
             las_source: Default::default(),
+            viewpoint: None,
         }
     }
 

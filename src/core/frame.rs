@@ -201,6 +201,7 @@ impl Frame {
                 .collect(),
             quantization: None,
             crs: Vec::new(),
+            viewpoint: None,
             ..cloud.clone()
         }
     }

@@ -533,6 +533,7 @@ mod tests {
             crs: Vec::new(),
             extra_bytes: Vec::new(),
             las_source: Default::default(),
+            viewpoint: None,
         }
     }
 

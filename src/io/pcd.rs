@@ -64,6 +64,7 @@ enum Data {
 
 struct Header {
     fields: Vec<Field>,
+    viewpoint: Option<[f64; 7]>,
     points: usize,
     data: Data,
     /// Byte offset of the body.
@@ -84,7 +85,11 @@ struct Declared {
     width: Option<usize>,
     height: Option<usize>,
     points: Option<usize>,
+    viewpoint: Option<[f64; 7]>,
 }
+
+/// The pose PCD files declare when they have none.
+const IDENTITY: [f64; 7] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
 
 fn parse_header(bytes: &[u8]) -> Result<Header, Problem> {
     let mut declared = Declared::default();
@@ -134,7 +139,8 @@ impl Declared {
             }
         };
         match key.as_str() {
-            "VERSION" | "VIEWPOINT" => {}
+            "VERSION" => {}
+            "VIEWPOINT" => self.viewpoint = viewpoint(&rest),
             "FIELDS" | "COLUMNS" => self.names = Some(rest.iter().map(|s| s.to_string()).collect()),
             "SIZE" => self.sizes = Some(numbers("SIZE")?),
             "COUNT" => self.counts = Some(numbers("COUNT")?),
@@ -210,11 +216,23 @@ impl Declared {
         check_points(points)?;
         Ok(Header {
             fields,
+            viewpoint: self.viewpoint,
             points,
             data,
             body,
         })
     }
+}
+
+/// A `VIEWPOINT` line's pose; none for the identity, and for a line that is not 7 finite
+/// numbers (which no reader needs: the points do not depend on it).
+fn viewpoint(rest: &[&str]) -> Option<[f64; 7]> {
+    let numbers: Vec<f64> = rest
+        .iter()
+        .map(|w| w.parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<_>>()?;
+    let pose: [f64; 7] = numbers.try_into().ok()?;
+    (pose != IDENTITY).then_some(pose)
 }
 
 /// A `TYPE` line's letters.
@@ -279,6 +297,7 @@ impl Collector {
                 crs: Vec::new(),
                 extra_bytes: Vec::new(),
                 las_source: Default::default(),
+                viewpoint: header.viewpoint,
             },
             attributes,
         }
@@ -568,7 +587,14 @@ fn write_header(
     writeln!(w, "COUNT {}", join(vec!["1".to_string(); names.len()]))?;
     writeln!(
         w,
-        "WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}"
+        "WIDTH {n}\nHEIGHT 1\nVIEWPOINT {}\nPOINTS {n}",
+        join(
+            cloud
+                .viewpoint
+                .unwrap_or(IDENTITY)
+                .map(|v| v.to_string())
+                .to_vec()
+        )
     )?;
     let data = match encoding {
         Encoding::Ascii => "ascii",
@@ -672,6 +698,30 @@ mod tests {
         assert_eq!(c.colors.unwrap(), vec![[255, 0, 0], [0, 0, 255]]);
         assert_eq!(c.attributes[0].name, "intensity");
         assert_eq!(c.attributes[0].values, vec![7.0, 9.0]);
+    }
+
+    /// The sensor pose a PCD declares was written back as the identity; it is kept through
+    /// every encoding, and a VIEWPOINT that is not seven numbers is not an error.
+    #[test]
+    fn the_viewpoint_is_kept() {
+        let pose = [1.5, -2.0, 0.25, 0.5, 0.5, -0.5, 0.5];
+        let words = pose.map(|v| v.to_string()).join(" ");
+        let header = HEADER.replace("VIEWPOINT 0 0 0 1 0 0 0", &format!("VIEWPOINT {words}"));
+        let c = read_bytes(format!("{header}DATA ascii\n1 2 3 0 7\n4 5 6 0 9\n").as_bytes());
+        let c = c.unwrap();
+        assert_eq!(c.viewpoint, Some(pose));
+        for encoding in [Encoding::Ascii, Encoding::Binary, Encoding::Compressed] {
+            let mut written = Vec::new();
+            write(&mut written, &c, encoding).unwrap();
+            assert_eq!(
+                read_bytes(&written).unwrap().viewpoint,
+                Some(pose),
+                "{encoding:?}"
+            );
+        }
+        let odd = HEADER.replace("VIEWPOINT 0 0 0 1 0 0 0", "VIEWPOINT 0 0 0 1");
+        let c = read_bytes(format!("{odd}DATA ascii\n1 2 3 0 7\n4 5 6 0 9\n").as_bytes());
+        assert_eq!(c.unwrap().viewpoint, None);
     }
 
     #[test]

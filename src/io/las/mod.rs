@@ -328,6 +328,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
             file_source_id: header.file_source_id(),
             system_identifier: header.system_identifier().to_string(),
         },
+        viewpoint: None,
     })
 }
 

@@ -327,6 +327,26 @@ pub fn write_cloud(
     .map_err(err)
 }
 
+/// The names a writer gives `cloud`'s attributes: their own, but a name the format would read
+/// as something else (`taken`: a coordinate or a colour channel) or one already given gets
+/// `_2`, `_3`… (none another attribute has), so that the file reads back with every attribute
+/// apart.
+pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) -> Vec<String> {
+    let mut names: Vec<String> = Vec::with_capacity(cloud.attributes.len());
+    for a in &cloud.attributes {
+        let mut name = a.name.clone();
+        let another_own = |name: &str| name != a.name && cloud.attribute(name).is_some();
+        for n in 2.. {
+            if !taken(&name) && !names.contains(&name) && !another_own(&name) {
+                break;
+            }
+            name = format!("{}_{n}", a.name);
+        }
+        names.push(name);
+    }
+    names
+}
+
 /// What `cloud` holds that a `format` file has no place for, as a warning: a LAS input's
 /// coordinate reference system, which only LAS and LAZ store.
 pub fn unwritten(cloud: &PointCloud, format: Format) -> Option<&'static str> {
@@ -568,6 +588,39 @@ mod tests {
                     assert_eq!(back.colors, cloud.colors, "{ext} {enc:?}");
                     assert_eq!(back.attributes, cloud.attributes, "{ext} {enc:?}");
                 }
+            }
+        }
+    }
+
+    /// Attributes named like a coordinate or colour of the output's format (`X` from a text
+    /// header, `red` or `rgb` from another format) were written under those names, and read
+    /// back as the coordinate or colour (or refused: "2 properties for 'x'"); they are renamed.
+    #[test]
+    fn attributes_named_like_coordinates_or_colours_stay_attributes() {
+        let mut cloud = colored_cloud(false);
+        let n = cloud.len();
+        for (k, name) in ["X", "red", "rgb", "red_2"].into_iter().enumerate() {
+            cloud.attributes.push(Attribute {
+                name: name.into(),
+                kind: ScalarKind::F32,
+                values: vec![k as f32 as f64 + 0.5; n],
+            });
+        }
+        let renamed = [
+            ("ply", ["X_2", "red_3", "rgb", "red_2"]),
+            ("pcd", ["X", "red", "rgb_2", "red_2"]),
+        ];
+        for (ext, names) in renamed {
+            for encoding in [Encoding::Binary, Encoding::Ascii] {
+                let back = round_trip(ext, encoding, &cloud);
+                assert_eq!(back.positions, cloud.positions, "{ext}");
+                assert_eq!(back.colors, cloud.colors, "{ext}");
+                let got: Vec<(&str, f64)> = back.attributes[2..]
+                    .iter()
+                    .map(|a| (a.name.as_str(), a.values[0]))
+                    .collect();
+                let want: Vec<(&str, f64)> = names.into_iter().zip([0.5, 1.5, 2.5, 3.5]).collect();
+                assert_eq!(got, want, "{ext} {encoding:?}");
             }
         }
     }

@@ -562,10 +562,9 @@ fn write_header(
         let ascii = encoding == Encoding::Ascii;
         types.push((if ascii { 'U' } else { 'F' }, 4));
     }
-    for a in &cloud.attributes {
-        names.push(a.name.clone());
-        types.push(type_and_size(a.kind));
-    }
+    let taken = |n: &str| ["x", "y", "z", "rgb", "rgba", "_"].contains(&n);
+    names.extend(super::attribute_names(cloud, taken));
+    types.extend(cloud.attributes.iter().map(|a| type_and_size(a.kind)));
     let n = cloud.len();
     let join = |v: Vec<String>| v.join(" ");
     writeln!(

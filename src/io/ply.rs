@@ -387,8 +387,9 @@ pub(super) fn write(
             writeln!(w, "property uchar {c}")?;
         }
     }
-    for a in &cloud.attributes {
-        writeln!(w, "property {} {}", type_name(a.kind), a.name)?;
+    let names = super::attribute_names(cloud, |n| role(n) != Role::Other);
+    for (a, name) in cloud.attributes.iter().zip(names) {
+        writeln!(w, "property {} {name}", type_name(a.kind))?;
     }
     writeln!(w, "end_header")?;
     for i in 0..cloud.len() {

@@ -499,6 +499,23 @@ mod tests {
         writer.close().unwrap();
     }
 
+    /// `cloud` written to `path` and read back, every attribute checked to come back as it was.
+    fn written_back(cloud: &PointCloud, path: &std::path::Path) -> PointCloud {
+        write_cloud(path, cloud, None, Encoding::Binary).unwrap();
+        let back = read_cloud(path, None).unwrap().cloud;
+        for a in &cloud.attributes {
+            let want = (a.kind, a.values.clone());
+            assert_eq!(
+                values(&back, &a.name),
+                want,
+                "{} {}",
+                a.name,
+                path.display()
+            );
+        }
+        back
+    }
+
     fn values(cloud: &PointCloud, name: &str) -> (ScalarKind, Vec<f64>) {
         let a = cloud
             .attribute(name)
@@ -536,16 +553,7 @@ mod tests {
         );
         for ext in ["las", "laz", "ply"] {
             let out = dir.path().join(format!("out.{ext}"));
-            write_cloud(&out, &cloud, None, Encoding::Binary).unwrap();
-            let back = read_cloud(&out, None).unwrap().cloud;
-            for a in &cloud.attributes {
-                assert_eq!(
-                    values(&back, &a.name),
-                    (a.kind, a.values.clone()),
-                    "{} {ext}",
-                    a.name
-                );
-            }
+            let back = written_back(&cloud, &out);
             if ext != "ply" {
                 // The undescribed bytes are not kept: 2 + 2 + 4 + 3 · 1.
                 let header = las::Reader::from_path(&out).unwrap().header().clone();
@@ -601,17 +609,7 @@ mod tests {
             ..PointCloud::default()
         };
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("out.las");
-        write_cloud(&path, &cloud, None, Encoding::Binary).unwrap();
-        let back = read_cloud(&path, None).unwrap().cloud;
-        for a in &cloud.attributes {
-            assert_eq!(
-                values(&back, &a.name),
-                (a.kind, a.values.clone()),
-                "{}",
-                a.name
-            );
-        }
+        written_back(&cloud, &dir.path().join("out.las"));
         let taken = Columns::new(
             vec![Field {
                 stored: StoredField {

@@ -106,6 +106,9 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
     Ok(cloud(table.columns, &layout))
 }
 
+/// The most values (all columns together, 128 MiB) reserved before they are read.
+const RESERVED_VALUES: usize = 1 << 24;
+
 /// The numbers of every line of `text`, each line holding as many as the first.
 fn table(text: &str) -> Result<Table, Problem> {
     let limit = max_points();
@@ -139,12 +142,12 @@ fn table(text: &str) -> Result<Table, Problem> {
             };
             return Err(at(format!("{values}, expected at least x y z")));
         }
-        // Sized once for every line that is left, so that no column is copied as it grows.
+        // Sized for the lines left, so that no column is copied as it grows, up to a bound: the
+        // lines may be comments, and a file of newlines must not reserve gigabytes.
         let columns = columns.get_or_insert_with(|| {
             let lines = text.bytes().filter(|&b| b == b'\n').count() + 1 - line_no;
-            (0..n)
-                .map(|_| Vec::with_capacity(lines.min(limit)))
-                .collect()
+            let reserve = lines.min(RESERVED_VALUES / n);
+            (0..n).map(|_| Vec::with_capacity(reserve)).collect()
         });
         if columns.len() != n {
             let c = columns.len();

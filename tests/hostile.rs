@@ -131,6 +131,24 @@ fn the_point_limit_is_stated_and_can_be_lowered() {
     assert!(!out.exists());
 }
 
+/// A text cloud's columns are sized for the lines left before they are read: a line of 100
+/// numbers followed by two million empty lines reserved 1.6 GB, which aborted under the limit
+/// before the bad line at the end was reached.
+#[test]
+fn a_text_file_of_empty_lines_reserves_little() {
+    let dir = TempDir::new().unwrap();
+    let mut text = vec!["1"; 100].join(" ");
+    text.push_str(&"\n".repeat(2_000_000));
+    text.push_str("1 2\n");
+    let input = write(dir.path(), "newlines.xyz", text.as_bytes());
+    let out = dir.path().join("out.ply");
+    refused(
+        &["filter", s(&input), s(&out)],
+        "newlines.xyz",
+        "2 values, expected at least x y z",
+    );
+}
+
 /// Each extra-bytes field of a LAS file is a column of f64 once read, so a compressed file of
 /// megabytes could ask for tens of gigabytes: the columns count against the same memory the
 /// point limit stands for.

@@ -14,6 +14,9 @@ const RECORD: u16 = 4;
 /// Bytes of one field's description in the VLR.
 const DESCRIPTION: usize = 192;
 
+/// The most fields one VLR (at most 65,535 bytes) describes.
+pub(super) const MAX_FIELDS: usize = u16::MAX as usize / DESCRIPTION;
+
 /// Where a description's parts lie: name (32 bytes), no-data value, scale and offset (three
 /// 8-byte slots each, one per element of the deprecated arrays), description (32 bytes).
 const NAME: usize = 4;
@@ -328,6 +331,11 @@ impl<'a> Layout<'a> {
         Layout { fields }
     }
 
+    /// How many fields the layout has.
+    pub(super) fn fields(&self) -> usize {
+        self.fields.len()
+    }
+
     /// Bytes of extra bytes per point.
     pub(super) fn len(&self) -> usize {
         self.fields.iter().map(|(f, _)| f.raw.size()).sum()
@@ -561,6 +569,32 @@ mod tests {
                 assert_eq!(back.extra_bytes, cloud.extra_bytes, "{ext}");
             }
         }
+    }
+
+    /// The Extra Bytes VLR describes at most 341 fields and a point record holds at most 65,535
+    /// bytes: more attributes are an error that says so, and nothing is written (342 u8
+    /// attributes failed with "feature Evlrs is not supported by version 1.2"); 341 f64 ones
+    /// are written.
+    #[test]
+    fn attributes_past_what_a_las_file_describes_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wide.las");
+        let wide = |count: usize, kind| PointCloud {
+            positions: vec![[0.0, 1.0, 2.0]],
+            attributes: (0..count)
+                .map(|k| Attribute {
+                    name: format!("a{k}"),
+                    kind,
+                    values: vec![k as f64],
+                })
+                .collect(),
+            ..PointCloud::default()
+        };
+        let error = write_cloud(&path, &wide(342, ScalarKind::U8), None, Encoding::Binary);
+        let error = error.unwrap_err().to_string();
+        assert!(error.contains("its 342 attributes besides"), "{error}");
+        assert!(!path.exists());
+        written_back(&wide(341, ScalarKind::F64), &path);
     }
 
     /// A field the point's bytes cannot hold is left out, not read past the record's end.

@@ -610,15 +610,18 @@ fn header_for(
     let nir = cloud.attribute("nir").is_some();
     let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide, nir);
     format.is_compressed = compressed;
-    format.extra_bytes = u16::try_from(format.len() as usize + extra.len())
-        .map(|_| extra.len() as u16)
-        .map_err(|_| {
-            Problem::Malformed(format!(
-                "its {} attributes need {} bytes a point, more than a LAS point record holds",
-                cloud.attributes.len(),
-                extra.len()
-            ))
-        })?;
+    if extra.fields() > extra_bytes::MAX_FIELDS
+        || usize::from(format.len()) + extra.len() > usize::from(u16::MAX)
+    {
+        return Err(Problem::Malformed(format!(
+            "its {} attributes besides the point record's fields need {} bytes a point; a LAS \
+             file describes at most {} such fields in records of at most 65,535 bytes",
+            extra.fields(),
+            extra.len(),
+            extra_bytes::MAX_FIELDS
+        )));
+    }
+    format.extra_bytes = extra.len() as u16;
     builder.point_format = format;
     builder.vlrs.extend(extra.vlr());
     builder.generating_software = format!("mvpcc {}", env!("CARGO_PKG_VERSION"));

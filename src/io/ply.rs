@@ -18,27 +18,19 @@ enum Role {
     Other,
 }
 
-/// Property names and what they hold, matched in any case (some writers name coordinates `X`).
-const ROLES: [(&str, Role); 12] = [
-    ("x", Role::Coordinate(0)),
-    ("y", Role::Coordinate(1)),
-    ("z", Role::Coordinate(2)),
-    ("red", Role::Color(0)),
-    ("r", Role::Color(0)),
-    ("diffuse_red", Role::Color(0)),
-    ("green", Role::Color(1)),
-    ("g", Role::Color(1)),
-    ("diffuse_green", Role::Color(1)),
-    ("blue", Role::Color(2)),
-    ("b", Role::Color(2)),
-    ("diffuse_blue", Role::Color(2)),
-];
-
+/// What a property holds, by its name in any case (some writers name coordinates `X`).
 fn role(name: &str) -> Role {
-    ROLES
-        .iter()
-        .find(|(known, _)| known.eq_ignore_ascii_case(name))
-        .map_or(Role::Other, |&(_, role)| role)
+    match name {
+        "x" => Role::Coordinate(0),
+        "y" => Role::Coordinate(1),
+        "z" => Role::Coordinate(2),
+        "red" | "r" | "diffuse_red" => Role::Color(0),
+        "green" | "g" | "diffuse_green" => Role::Color(1),
+        "blue" | "b" | "diffuse_blue" => Role::Color(2),
+        // Called for every property of every vertex: lowercase names, nearly all, need no copy.
+        _ if name.bytes().any(|b| b.is_ascii_uppercase()) => role(&name.to_ascii_lowercase()),
+        _ => Role::Other,
+    }
 }
 
 pub(crate) fn scalar_value(p: &Property) -> Option<f64> {

@@ -327,6 +327,18 @@ pub fn write_cloud(
     .map_err(err)
 }
 
+/// `base`, or the first of `base_2`, `base_3`… that `taken` does not hold.
+pub(crate) fn free_name(base: &str, taken: impl Fn(&str) -> bool) -> String {
+    let mut name = base.to_string();
+    for n in 2.. {
+        if !taken(&name) {
+            break;
+        }
+        name = format!("{base}_{n}");
+    }
+    name
+}
+
 /// The names a writer gives `cloud`'s attributes: their own, but a name the format would read
 /// as something else (`taken`: a coordinate or a colour channel) or one already given gets
 /// `_2`, `_3`… (none another attribute has), so that the file reads back with every attribute
@@ -334,14 +346,10 @@ pub fn write_cloud(
 pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) -> Vec<String> {
     let mut names: Vec<String> = Vec::with_capacity(cloud.attributes.len());
     for a in &cloud.attributes {
-        let mut name = a.name.clone();
         let another_own = |name: &str| name != a.name && cloud.attribute(name).is_some();
-        for n in 2.. {
-            if !taken(&name) && !names.contains(&name) && !another_own(&name) {
-                break;
-            }
-            name = format!("{}_{n}", a.name);
-        }
+        let name = free_name(&a.name, |n| {
+            taken(n) || names.iter().any(|m| m == n) || another_own(n)
+        });
         names.push(name);
     }
     names

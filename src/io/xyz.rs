@@ -185,13 +185,7 @@ fn names(line: &str) -> Vec<String> {
             .split_whitespace()
             .collect::<Vec<_>>()
             .join("_");
-        let mut name = base.clone();
-        for n in 2.. {
-            if !names.contains(&name) {
-                break;
-            }
-            name = format!("{base}_{n}");
-        }
+        let name = super::free_name(&base, |n| names.iter().any(|m| m == n));
         names.push(name);
     }
     names

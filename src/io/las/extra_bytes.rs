@@ -270,12 +270,7 @@ impl Columns {
         let mut names: Vec<String> = taken.iter().map(|s| s.to_string()).collect();
         for field in &mut fields {
             let name = &mut field.stored.name;
-            let base = name.clone();
-            let mut n = 1;
-            while names.contains(name) {
-                n += 1;
-                *name = format!("{base}_{n}");
-            }
+            *name = crate::io::free_name(name, |n| names.iter().any(|m| m == n));
             names.push(name.clone());
         }
         let values = vec![Vec::new(); fields.len()];

@@ -157,6 +157,25 @@ fn the_long_version_names_the_built_in_model_and_the_backends() {
         .stdout(format!("mvpcc {}\n", env!("CARGO_PKG_VERSION")));
 }
 
+/// The models are the binary's bulk: as `const`s their bytes were copied wherever they were
+/// named, and the 15 MB generator was carried three times (a 71 MB release binary for 41).
+#[test]
+fn the_binary_carries_each_built_in_model_once() {
+    let binary = std::fs::read(env!("CARGO_BIN_EXE_mvpcc")).unwrap();
+    for (name, model) in [
+        ("generator", mvpcc::complete::DEFAULT_MODEL),
+        ("orienter", mvpcc::complete::orient::DEFAULT_ORIENTER),
+    ] {
+        // The safetensors header: its length, then its JSON, which names every tensor's offsets.
+        let header = &model[..64];
+        let copies = binary
+            .windows(header.len())
+            .filter(|w| *w == header)
+            .count();
+        assert_eq!(copies, 1, "the {name} is in the binary {copies} times");
+    }
+}
+
 /// `mvpcc eval … | head -1` panicked ("failed printing to stdout: Broken pipe") once its reader
 /// had gone. More results than a pipe's 64 KiB make the writer meet the closed pipe however the
 /// two processes are scheduled.

@@ -20,8 +20,9 @@ use crate::core::cloud::PointCloud;
 use crate::core::frame::{upright, UpAxis};
 use std::str::FromStr;
 
-/// The built-in orientation network (see docs/orientation.md for how it was trained).
-pub const DEFAULT_ORIENTER: &[u8] = include_bytes!("../../../assets/orienter.safetensors");
+/// The built-in orientation network (see docs/orientation.md for how it was trained); a
+/// `static` for the reason [`crate::complete::DEFAULT_MODEL`] is one.
+pub static DEFAULT_ORIENTER: &[u8] = include_bytes!("../../../assets/orienter.safetensors");
 
 /// How `complete` finds the heading (`--orient`).
 #[derive(Debug, Clone, Copy, PartialEq)]

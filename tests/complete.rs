@@ -267,10 +267,24 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
     assert_eq!(&done.positions[..n], &read.positions[..]);
     assert_eq!(done.extra_bytes, cloud.extra_bytes);
     assert_eq!(done.las_source, cloud.las_source);
-    // A PLY output has no place for the coordinate system, and says so.
-    for command in ["complete", "filter"] {
+    // A PLY output has no place for the coordinate system, XYZ text none for attributes either
+    // (nor for which points were completed), and each says so.
+    for (command, output, lost) in [
+        ("complete", "done.ply", ""),
+        ("filter", "done.ply", ""),
+        (
+            "complete",
+            "done.xyz",
+            "attributes intensity, classification, gps_time, Reflectance and synthetic are",
+        ),
+        (
+            "filter",
+            "done.xyz",
+            "attributes intensity, classification, gps_time and Reflectance are",
+        ),
+    ] {
         mvpcc()
-            .args([command, s(&input), s(&dir.path().join("done.ply"))])
+            .args([command, s(&input), s(&dir.path().join(output))])
             .args(
                 ["--method", "mirror"]
                     .iter()
@@ -278,9 +292,12 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
             )
             .assert()
             .success()
-            .stderr(predicate::str::contains(
-                "scan.las: its coordinate reference system is not written",
-            ));
+            .stderr(
+                predicate::str::contains(
+                    "scan.las: its coordinate reference system is not written",
+                )
+                .and(predicate::str::contains(format!("scan.las: {lost}"))),
+            );
     }
     for name in ["gps_time", "Reflectance"] {
         let values = &done.attribute(name).unwrap().values;

@@ -355,12 +355,47 @@ pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) 
     names
 }
 
-/// What `cloud` holds that a `format` file has no place for, as a warning: a LAS input's
-/// coordinate reference system, which only LAS and LAZ store.
-pub fn unwritten(cloud: &PointCloud, format: Format) -> Option<&'static str> {
-    (!cloud.crs.is_empty() && !matches!(format, Format::Las | Format::Laz)).then_some(
-        "its coordinate reference system is not written: only a LAS or LAZ output holds one",
-    )
+/// What `cloud` holds that a `format` file has no place for, one warning each: a LAS input's
+/// coordinate reference system (only LAS and LAZ store one), a PCD input's viewpoint (only PCD),
+/// and attributes in XYZ text, which holds coordinates and colours only (completed points lose
+/// their `synthetic` flag there).
+pub fn unwritten(cloud: &PointCloud, format: Format) -> Vec<String> {
+    let mut lost = Vec::new();
+    if !cloud.crs.is_empty() && !matches!(format, Format::Las | Format::Laz) {
+        lost.push(
+            "its coordinate reference system is not written: only a LAS or LAZ output holds one"
+                .to_string(),
+        );
+    }
+    if cloud.viewpoint.is_some() && format != Format::Pcd {
+        lost.push("its viewpoint is not written: only a PCD output holds one".to_string());
+    }
+    if !cloud.attributes.is_empty() && format == Format::Xyz {
+        lost.push(format!(
+            "{} not written: XYZ text holds coordinates and colours only (PLY, PCD or \
+             LAS keep them)",
+            named_list(cloud.attributes.iter().map(|a| a.name.as_str()))
+        ));
+    }
+    lost
+}
+
+/// "attribute intensity is" or "attributes a, b, c, d and 4 more are" ("and 1 more" never).
+fn named_list<'a>(names: impl ExactSizeIterator<Item = &'a str>) -> String {
+    const SHOWN: usize = 4;
+    let count = names.len();
+    let mut shown: Vec<&str> = names
+        .take(if count > SHOWN + 1 { SHOWN } else { count })
+        .collect();
+    let rest = count - shown.len();
+    match (count, rest) {
+        (1, _) => format!("attribute {} is", shown[0]),
+        (_, 0) => {
+            let last = shown.pop().unwrap_or_default();
+            format!("attributes {} and {last} are", shown.join(", "))
+        }
+        _ => format!("attributes {} and {rest} more are", shown.join(", ")),
+    }
 }
 
 /// Refuses an output that is one of the inputs (also through symbolic links), a directory, and an
@@ -519,6 +554,46 @@ mod tests {
             assert_eq!(mode & 0o777, 0o640, "{name}");
             assert_eq!(read_cloud(&path, None).unwrap().cloud.len(), cloud.len());
         }
+    }
+
+    /// Each thing a format has no place for is named once, and only for that format.
+    #[test]
+    fn what_a_format_cannot_hold_is_named() {
+        let mut cloud = colored_cloud(false);
+        let flag = |name: &str| Attribute {
+            name: name.into(),
+            kind: ScalarKind::U8,
+            values: vec![0.0; cloud.len()],
+        };
+        let attributes: Vec<Attribute> = ["synthetic", "intensity", "a", "b", "c", "d"]
+            .into_iter()
+            .map(flag)
+            .collect();
+        let lost = |cloud: &PointCloud, format| unwritten(cloud, format).join(" | ");
+        cloud.attributes.clear();
+        assert_eq!(lost(&cloud, Format::Xyz), "");
+        cloud.attributes = attributes[..1].to_vec();
+        assert!(lost(&cloud, Format::Xyz).starts_with("attribute synthetic is not written"));
+        assert_eq!(lost(&cloud, Format::Ply), "");
+        cloud.attributes = attributes[..2].to_vec();
+        assert!(lost(&cloud, Format::Xyz).starts_with("attributes synthetic and intensity are"));
+        cloud.attributes = attributes[..5].to_vec();
+        assert!(
+            lost(&cloud, Format::Xyz).starts_with("attributes synthetic, intensity, a, b and c")
+        );
+        cloud.attributes = attributes;
+        assert!(lost(&cloud, Format::Xyz)
+            .starts_with("attributes synthetic, intensity, a, b and 2 more are not written"));
+        cloud.attributes.clear();
+        cloud.viewpoint = Some([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
+        cloud.crs = vec![crate::core::cloud::CrsRecord {
+            record_id: 2112,
+            description: "OGC WKT".into(),
+            data: b"GEOGCS[\"WGS 84\"]\0".to_vec(),
+        }];
+        assert_eq!(lost(&cloud, Format::Pcd).matches("not written").count(), 1);
+        assert_eq!(lost(&cloud, Format::Las).matches("not written").count(), 1);
+        assert_eq!(lost(&cloud, Format::Ply).matches("not written").count(), 2);
     }
 
     fn colored_cloud(georeferenced: bool) -> PointCloud {

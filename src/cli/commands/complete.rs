@@ -255,10 +255,11 @@ fn complete_file(
         Some(dir) => save_views(dir, &run.completion)?,
         None => None,
     };
+    let lost = unwritten(&run.completion.cloud, format);
     let warnings = &mut run.completion.warnings;
     warnings.splice(0..0, non_finite_warning(loaded.non_finite_dropped));
     warnings.extend(saved);
-    warnings.extend(unwritten(&cloud, format).map(String::from));
+    warnings.extend(lost);
     if let Some((_, report)) = &run.cleaned {
         log.info(format!(
             "{}: --clean removed {} ground, {} isolated and {} other-object points",

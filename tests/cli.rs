@@ -204,6 +204,31 @@ fn a_reader_that_goes_away_ends_the_results_quietly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
+/// `mvpcc filter scan.ply /dev/stdout | head` ended with "cannot write: Broken pipe" and a
+/// failure, where the same through `-` ended quietly; both now end as `-` does. A cloud larger
+/// than a pipe's 64 KiB meets the closed pipe however the processes are scheduled.
+#[cfg(unix)]
+#[test]
+fn a_cloud_sent_to_a_reader_that_goes_away_ends_quietly() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "car.ply", &car());
+    for output in ["-", "/dev/stdout"] {
+        for format in ["xyz", "las"] {
+            let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("mvpcc"))
+                .args(["filter", s(&input), output, "--out-format", format])
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap();
+            drop(child.stdout.take());
+            let done = child.wait_with_output().unwrap();
+            let stderr = String::from_utf8_lossy(&done.stderr);
+            assert!(done.status.success(), "{output} {format}: {stderr}");
+            assert!(!stderr.contains("error"), "{output} {format}: {stderr}");
+        }
+    }
+}
+
 #[test]
 fn eval_over_directories_matches_by_path_without_extension() {
     let dir = TempDir::new().unwrap();

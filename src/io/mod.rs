@@ -474,8 +474,10 @@ where
         Destination::Stream => {
             let stream = File::options().write(true).open(path)?;
             let mut w = BufWriter::with_capacity(1 << 20, &stream);
-            body(&mut w)?;
-            return w.flush();
+            return match body(&mut w).and_then(|()| w.flush()) {
+                Err(e) if reader_left(&e) => Ok(()),
+                written => written,
+            };
         }
     };
     let tmp = temp_file_beside(&file)?;
@@ -504,9 +506,18 @@ fn write_las(path: &Path, cloud: &PointCloud, compressed: bool) -> Result<(), Pr
         Destination::Stream => {
             let format = if compressed { Format::Laz } else { Format::Las };
             let mut stream = File::options().write(true).open(path)?;
-            write_whole_into(&mut stream, cloud, format, Encoding::Binary)
+            match write_whole_into(&mut stream, cloud, format, Encoding::Binary) {
+                Err(Problem::Io(e)) if reader_left(&e) => Ok(()),
+                written => written,
+            }
         }
     }
+}
+
+/// Whether a write into a stream failed because its reader went away (`| head`): what it did
+/// not read it did not want, so that is no error.
+fn reader_left(e: &std::io::Error) -> bool {
+    e.kind() == std::io::ErrorKind::BrokenPipe
 }
 
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),

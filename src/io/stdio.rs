@@ -85,8 +85,7 @@ pub(super) fn write_stdout(
     let err = |problem| CloudIoError::new(Path::new(STDIO), problem);
     let format = format.ok_or_else(|| err(Problem::StdoutFormat))?;
     match write_whole_into(&mut std::io::stdout().lock(), cloud, format, encoding) {
-        // The reader went away (`| head`): what it did not read it did not want.
-        Err(Problem::Io(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        Err(Problem::Io(e)) if super::reader_left(&e) => Ok(()),
         written => written.map_err(err),
     }
 }

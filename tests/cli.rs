@@ -229,6 +229,62 @@ fn a_cloud_sent_to_a_reader_that_goes_away_ends_quietly() {
     }
 }
 
+/// Ctrl-C, or a scheduler's SIGTERM, left the temporary files a command was writing: a
+/// `.mvpcc-*.tmp` beside the output, or in the temporary folder the copy of standard input or
+/// the whole cloud for standard output. Each is caught here while it exists (the command blocked
+/// on a pipe that is neither closed nor read), and the signal must remove it.
+#[cfg(unix)]
+#[test]
+fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
+    use std::io::Write as _;
+    use std::process::Stdio;
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "car.ply", &car());
+    let ply = std::fs::read(&input).unwrap();
+    for (signal, reads_stdin) in [("-INT", true), ("-TERM", false), ("-HUP", true)] {
+        let tmp = TempDir::new().unwrap();
+        let output = dir.path().join("out.ply");
+        let (from, to) = if reads_stdin {
+            ("-", s(&output))
+        } else {
+            (s(&input), "-")
+        };
+        let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("mvpcc"))
+            .args(["filter", from, to, "--out-format", "ply"])
+            .env("TMPDIR", tmp.path())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut stdin = child.stdin.take().unwrap();
+        if reads_stdin {
+            stdin.write_all(&ply[..ply.len() / 2]).unwrap();
+        }
+        let started = std::time::Instant::now();
+        while std::fs::read_dir(tmp.path()).unwrap().next().is_none() {
+            assert!(
+                started.elapsed().as_secs() < 60,
+                "{signal}: no temporary file"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        // Past the file's creation and into the blocked read or write.
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let id = child.id().to_string();
+        let killed = std::process::Command::new("kill")
+            .args([signal, &id])
+            .status();
+        assert!(killed.unwrap().success());
+        let done = child.wait_with_output().unwrap();
+        drop(stdin);
+        assert_eq!(done.status.code(), Some(130), "{signal}");
+        let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
+        assert!(left.is_empty(), "{signal}: {left:?}");
+        assert!(!output.exists(), "{signal}");
+    }
+}
+
 #[test]
 fn eval_over_directories_matches_by_path_without_extension() {
     let dir = TempDir::new().unwrap();

@@ -3,6 +3,7 @@
 
 pub mod args;
 pub mod commands;
+pub mod interrupt;
 pub mod streams;
 
 /// `n` and the noun, plural unless `n` is 1: "1 view", "4 views".

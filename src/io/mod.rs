@@ -1,12 +1,15 @@
 //! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
 //! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it (a
-//! device or pipe is written into instead). `-` is standard input or output ([`stdio`]).
+//! device or pipe is written into instead). `-` is standard input or output ([`stdio`]). A
+//! command stopped by a signal deletes the temporary files it was writing
+//! ([`remove_unfinished`]).
 
 pub mod batch;
 mod las;
 mod pcd;
 pub(crate) mod ply;
 pub mod stdio;
+mod unfinished;
 mod xyz;
 
 use crate::core::cloud::PointCloud;
@@ -15,6 +18,8 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use stdio::{is_stdio, is_stream, spooled, write_stdout, write_whole_into};
 use thiserror::Error;
+pub use unfinished::remove_unfinished;
+use unfinished::{track, Tracked};
 
 /// Point cloud file formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -482,7 +487,7 @@ where
     };
     let tmp = temp_file_beside(&file)?;
     {
-        let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file());
+        let mut w = BufWriter::with_capacity(1 << 20, tmp.file.as_file());
         body(&mut w)?;
         w.flush()?;
     }
@@ -491,11 +496,14 @@ where
 
 /// Renames a finished temporary file over `file`, which keeps the permissions it had (a new
 /// file gets those of an ordinary new file).
-fn persist(tmp: tempfile::NamedTempFile, file: &Path) -> std::io::Result<()> {
+fn persist(tmp: Beside, file: &Path) -> std::io::Result<()> {
+    let Beside { file: tmp, tracked } = tmp;
     if let Ok(meta) = std::fs::metadata(file) {
         tmp.as_file().set_permissions(meta.permissions())?;
     }
-    tmp.persist(file).map(drop).map_err(|e| e.error)
+    let persisted = tmp.persist(file).map(drop).map_err(|e| e.error);
+    drop(tracked);
+    persisted
 }
 
 /// LAS/LAZ, whose writer seeks back to its header: into a device, pipe or socket it is written
@@ -520,9 +528,15 @@ fn reader_left(e: &std::io::Error) -> bool {
     e.kind() == std::io::ErrorKind::BrokenPipe
 }
 
+/// An output's temporary file, deleted if the process is stopped before it is renamed.
+struct Beside {
+    file: tempfile::NamedTempFile,
+    tracked: Tracked,
+}
+
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),
 /// created with the permissions of an ordinary new file rather than tempfile's private 0600.
-fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+fn temp_file_beside(path: &Path) -> std::io::Result<Beside> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -534,7 +548,9 @@ fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    builder.tempfile_in(dir)
+    let file = builder.tempfile_in(dir)?;
+    let tracked = track(file.path());
+    Ok(Beside { file, tracked })
 }
 
 /// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.

@@ -7,6 +7,7 @@
 //! whole to a temporary file first and then copied out, so a write that fails sends nothing
 //! rather than half a file.
 
+use super::unfinished::{track, Tracked};
 use super::{write_cloud, CloudIoError, Encoding, Format, Problem};
 use crate::core::cloud::PointCloud;
 use std::fs::File;
@@ -36,6 +37,7 @@ struct Spooled {
     source: PathBuf,
     copy: TempPath,
     format: Format,
+    _tracked: Tracked,
 }
 
 static SPOOLED: Mutex<Vec<Spooled>> = Mutex::new(Vec::new());
@@ -48,6 +50,7 @@ pub(super) fn spooled(path: &Path) -> Result<(PathBuf, Format), Problem> {
         return Ok((s.copy.to_path_buf(), s.format));
     }
     let mut file = NamedTempFile::new()?;
+    let tracked = track(file.path());
     if is_stdio(path) {
         std::io::copy(&mut std::io::stdin().lock(), &mut file)?;
     } else {
@@ -63,6 +66,7 @@ pub(super) fn spooled(path: &Path) -> Result<(PathBuf, Format), Problem> {
         source: path.to_path_buf(),
         copy,
         format,
+        _tracked: tracked,
     });
     Ok(found)
 }
@@ -99,6 +103,7 @@ pub(super) fn write_whole_into(
     encoding: Encoding,
 ) -> Result<(), Problem> {
     let dir = tempfile::tempdir()?;
+    let _tracked = track(dir.path());
     let whole = dir.path().join("cloud");
     write_cloud(&whole, cloud, Some(format), encoding).map_err(|e| e.problem)?;
     std::io::copy(&mut File::open(&whole)?, out)?;

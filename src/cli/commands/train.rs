@@ -292,15 +292,8 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
         run.display()
     ));
 
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
     // The first Ctrl-C asks the loop to checkpoint and stop; a second one stops at once.
-    ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
-        }
-    })
-    .context("cannot install the Ctrl-C handler")?;
+    let stop = crate::cli::interrupt::graceful();
 
     let bar = super::step_bar(0, log);
     let mut monitor = Progress { bar, log, stop };

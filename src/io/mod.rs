@@ -327,7 +327,9 @@ pub fn write_cloud(
         Format::Pcd => {
             atomic_write(path, |w| pcd::write(w, cloud, encoding)).map_err(write_problem)
         }
-        Format::Xyz => atomic_write(path, |w| xyz::write(w, cloud)).map_err(write_problem),
+        Format::Xyz => {
+            atomic_write(path, |w| xyz::write(w, cloud, xyz::is_pts(path))).map_err(write_problem)
+        }
     }
     .map_err(err)
 }
@@ -360,11 +362,11 @@ pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) 
     names
 }
 
-/// What `cloud` holds that a `format` file has no place for, one warning each: a LAS input's
-/// coordinate reference system (only LAS and LAZ store one), a PCD input's viewpoint (only PCD),
-/// and attributes in XYZ text, which holds coordinates and colours only (completed points lose
-/// their `synthetic` flag there).
-pub fn unwritten(cloud: &PointCloud, format: Format) -> Vec<String> {
+/// What `cloud` holds that a `format` file at `output` has no place for, one warning each: a LAS
+/// input's coordinate reference system (only LAS and LAZ store one), a PCD input's viewpoint
+/// (only PCD), and attributes in XYZ text, which holds coordinates and colours only (and PTS
+/// the intensity; completed points lose their `synthetic` flag there).
+pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<String> {
     let mut lost = Vec::new();
     if !cloud.crs.is_empty() && !matches!(format, Format::Las | Format::Laz) {
         lost.push(
@@ -375,11 +377,16 @@ pub fn unwritten(cloud: &PointCloud, format: Format) -> Vec<String> {
     if cloud.viewpoint.is_some() && format != Format::Pcd {
         lost.push("its viewpoint is not written: only a PCD output holds one".to_string());
     }
-    if !cloud.attributes.is_empty() && format == Format::Xyz {
+    let pts = xyz::is_pts(output);
+    let dropped: Vec<&str> = (cloud.attributes.iter().map(|a| a.name.as_str()))
+        .filter(|&name| !(pts && name == xyz::INTENSITY))
+        .collect();
+    if !dropped.is_empty() && format == Format::Xyz {
         lost.push(format!(
-            "{} not written: XYZ text holds coordinates and colours only (PLY, PCD or \
-             LAS keep them)",
-            named_list(cloud.attributes.iter().map(|a| a.name.as_str()))
+            "{} not written: XYZ text holds coordinates and colours only{} (PLY, PCD or LAS \
+             keep them)",
+            named_list(dropped.into_iter()),
+            if pts { ", and PTS the intensity" } else { "" }
         ));
     }
     lost
@@ -596,7 +603,9 @@ mod tests {
             .into_iter()
             .map(flag)
             .collect();
-        let lost = |cloud: &PointCloud, format| unwritten(cloud, format).join(" | ");
+        let lost = |cloud: &PointCloud, format| {
+            unwritten(cloud, format, Path::new("cloud.xyz")).join(" | ")
+        };
         cloud.attributes.clear();
         assert_eq!(lost(&cloud, Format::Xyz), "");
         cloud.attributes = attributes[..1].to_vec();
@@ -608,6 +617,12 @@ mod tests {
         assert!(
             lost(&cloud, Format::Xyz).starts_with("attributes synthetic, intensity, a, b and c")
         );
+        let pts = unwritten(&cloud, Format::Xyz, Path::new("cloud.PTS")).join(" | ");
+        assert!(
+            pts.starts_with("attributes synthetic, a, b and c are not written"),
+            "{pts}"
+        );
+        assert!(pts.contains("PTS the intensity"), "{pts}");
         cloud.attributes = attributes;
         assert!(lost(&cloud, Format::Xyz)
             .starts_with("attributes synthetic, intensity, a, b and 2 more are not written"));

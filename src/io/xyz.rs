@@ -8,6 +8,9 @@ use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
 use std::io::Write;
 use std::path::Path;
 
+/// The attribute a fourth column of four, or PTS's, is read as and written from.
+pub(super) const INTENSITY: &str = "intensity";
+
 /// What one column of the file holds.
 #[derive(Debug, Clone, PartialEq)]
 enum Column {
@@ -60,7 +63,7 @@ impl Layout {
     /// colours, are attributes named by their place (`column_4`).
     fn by_count(n: usize, pts: bool, colors_at_4: bool) -> Layout {
         let first_color = match n {
-            4 => return Layout::named(&["x", "y", "z", "intensity"]),
+            4 => return Layout::named(&["x", "y", "z", INTENSITY]),
             7 if pts => Some(4),
             _ if n >= 6 && colors_at_4 => Some(3),
             _ => None,
@@ -68,7 +71,7 @@ impl Layout {
         let columns = (0..n).map(|k| match (k, first_color) {
             (0..=2, _) => Column::Position(k),
             (_, Some(first)) if (first..first + 3).contains(&k) => Column::Color(k - first),
-            (3, _) if pts && n == 7 => Column::Attribute("intensity".into()),
+            (3, _) if pts && n == 7 => Column::Attribute(INTENSITY.into()),
             _ => Column::Attribute(format!("column_{}", k + 1)),
         });
         Layout(columns.collect())
@@ -93,9 +96,7 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         _ => Problem::Io(e),
     })?;
     let table = table(&text)?;
-    let pts = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("pts"));
+    let pts = is_pts(path);
     let colors_at_4 = table.columns.len() >= 6 && looks_like_colors(&table.columns[3..6]);
     let layout = table
         .header
@@ -296,9 +297,26 @@ fn to_bytes(rgb: &[Vec<f64>; 3]) -> Vec<[u8; 3]> {
         .collect()
 }
 
-pub(super) fn write(w: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+/// Whether `path` names a Leica PTS file: its point count, then `x y z intensity [r g b]`.
+pub(super) fn is_pts(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("pts"))
+}
+
+/// `x y z [r g b]` a line; for PTS, the count first and the intensity after the coordinates
+/// wherever there is one or colours follow (0 where the cloud has none).
+pub(super) fn write(w: &mut impl Write, cloud: &PointCloud, pts: bool) -> std::io::Result<()> {
+    let intensity = cloud.attribute(INTENSITY).map(|a| &a.values[..]);
+    let intensity = (pts && (intensity.is_some() || cloud.colors.is_some()))
+        .then_some(intensity.unwrap_or(&[]));
+    if pts {
+        writeln!(w, "{}", cloud.len())?;
+    }
     for (i, p) in cloud.positions.iter().enumerate() {
         write!(w, "{} {} {}", p[0], p[1], p[2])?;
+        if let Some(values) = intensity {
+            write!(w, " {}", values.get(i).copied().unwrap_or(0.0))?;
+        }
         if let Some(c) = &cloud.colors {
             write!(w, " {} {} {}", c[i][0], c[i][1], c[i][2])?;
         }
@@ -342,6 +360,30 @@ mod tests {
         let c = read_str("1 2 3 0.25\n4 5 6 0.5\n").unwrap();
         assert_eq!(column(&c, "intensity"), (ScalarKind::F32, vec![0.25, 0.5]));
         assert!(c.colors.is_none());
+    }
+
+    /// A `.pts` output was `x y z r g b` lines without the count, which PTS readers take for
+    /// a point and whose fourth column they read as the intensity. It is written as PTS, and
+    /// reads back as it was (a cloud with colours and no intensity gets intensity 0).
+    #[test]
+    fn pts_files_are_written_as_pts() {
+        let source = "3\n1 2 3 -1200 255 10 0\n4 5 6 300 0 20 255\n7 8 9.5 0 1 2 3\n";
+        let cloud = read_named("scan.pts", source).unwrap();
+        let written = |cloud: &PointCloud, pts| {
+            let mut text = Vec::new();
+            write(&mut text, cloud, pts).unwrap();
+            String::from_utf8(text).unwrap()
+        };
+        assert_eq!(written(&cloud, true), source);
+        assert_eq!(read_named("again.pts", source).unwrap().positions, cloud.positions);
+        assert!(written(&cloud, false).starts_with("1 2 3 255 10 0\n"));
+        let mut bare = cloud.clone();
+        bare.attributes.clear();
+        assert!(written(&bare, true).starts_with("3\n1 2 3 0 255 10 0\n"));
+        bare.colors = None;
+        assert!(written(&bare, true).starts_with("3\n1 2 3\n"));
+        let with_intensity = read_named("b.pts", "2\n1 2 3 7\n4 5 6 8\n").unwrap();
+        assert_eq!(written(&with_intensity, true), "2\n1 2 3 7\n4 5 6 8\n");
     }
 
     /// A header names the columns, in any order and case (CloudCompare's `//X,Y,Z,…`, names

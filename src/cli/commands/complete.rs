@@ -255,7 +255,7 @@ fn complete_file(
         Some(dir) => save_views(dir, &run.completion)?,
         None => None,
     };
-    let lost = unwritten(&run.completion.cloud, format);
+    let lost = unwritten(&run.completion.cloud, format, output);
     let warnings = &mut run.completion.warnings;
     warnings.splice(0..0, non_finite_warning(loaded.non_finite_dropped));
     warnings.extend(saved);

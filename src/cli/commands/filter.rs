@@ -8,7 +8,7 @@ pub(super) fn run(args: FilterArgs, log: Log) -> anyhow::Result<()> {
     check_output(&args.output, &[&args.input])?;
     let format = output_format(&args.output, args.output_options.out_format)?;
     let cloud = load(&args.input, args.input_options.format, log)?;
-    for warning in unwritten(&cloud, format) {
+    for warning in unwritten(&cloud, format, &args.output) {
         log.warn(format!("{}: {warning}", args.input.display()));
     }
     let filtered = cloud.filter(&inliers(&cloud.positions, args.sor.params()));

@@ -375,7 +375,10 @@ mod tests {
             String::from_utf8(text).unwrap()
         };
         assert_eq!(written(&cloud, true), source);
-        assert_eq!(read_named("again.pts", source).unwrap().positions, cloud.positions);
+        assert_eq!(
+            read_named("again.pts", source).unwrap().positions,
+            cloud.positions
+        );
         assert!(written(&cloud, false).starts_with("1 2 3 255 10 0\n"));
         let mut bare = cloud.clone();
         bare.attributes.clear();

@@ -20,6 +20,8 @@ pub(super) const MAX_FIELDS: usize = u16::MAX as usize / DESCRIPTION;
 /// Where a description's parts lie: name (32 bytes), no-data value, scale and offset (three
 /// 8-byte slots each, one per element of the deprecated arrays), description (32 bytes).
 const NAME: usize = 4;
+/// The bytes a description holds of a field's name.
+const NAME_LEN: usize = 32;
 const NO_DATA: usize = 40;
 const SCALE: usize = 112;
 const OFFSET: usize = 136;
@@ -188,7 +190,7 @@ pub(super) fn described(header: &las::Header) -> Vec<Field> {
         let Some(raw) = Raw::from_code((data_type - 1) % 10 + 1).filter(|_| count <= 3) else {
             break;
         };
-        let name = field_name(&d[NAME..NAME + 32], k);
+        let name = field_name(&d[NAME..NAME + NAME_LEN], k);
         for j in 0..count {
             if at + raw.size() > room {
                 return fields;
@@ -316,9 +318,17 @@ impl<'a> Layout<'a> {
     pub(super) fn new(cloud: &'a PointCloud, standard: &[&str]) -> Layout<'a> {
         let mut at = 0;
         let mut fields = Vec::new();
+        let mut given: Vec<String> = (cloud.attributes.iter())
+            .map(|a| a.name.clone())
+            .filter(|name| name.len() <= NAME_LEN)
+            .collect();
         for attribute in &cloud.attributes {
             if !standard.contains(&attribute.name.as_str()) {
-                let (field, stored) = stored_as(cloud, attribute, at);
+                let (mut field, stored) = stored_as(cloud, attribute, at);
+                if field.stored.name.len() > NAME_LEN {
+                    field.stored.name = fitting(&field.stored.name, &given);
+                    given.push(field.stored.name.clone());
+                }
                 at += field.raw.size();
                 fields.push((field, stored));
             }
@@ -420,17 +430,38 @@ fn description(s: &StoredField) -> Vec<u8> {
         d[OFFSET..OFFSET + 8].copy_from_slice(&s.offset.to_le_bytes());
     }
     d[3] = options;
-    put_text(&mut d[NAME..NAME + 32], &s.name);
+    put_text(&mut d[NAME..NAME + NAME_LEN], &s.name);
     put_text(&mut d[TEXT..TEXT + TEXT_LEN], &s.description);
     d
 }
 
 fn put_text(slot: &mut [u8], text: &str) {
-    let mut end = text.len().min(slot.len());
+    let cut = cut(text, slot.len());
+    slot[..cut.len()].copy_from_slice(cut.as_bytes());
+}
+
+/// `text`'s first `len` bytes at most, ending at a character's end.
+fn cut(text: &str, len: usize) -> &str {
+    let mut end = text.len().min(len);
     while !text.is_char_boundary(end) {
         end -= 1;
     }
-    slot[..end].copy_from_slice(&text.as_bytes()[..end]);
+    &text[..end]
+}
+
+/// A name longer than a description holds, cut to fit and numbered (`…_2`) where the cut makes
+/// it one of the names `given`: two attributes that differ only past their 32nd byte were
+/// described under one name, and read back as one.
+fn fitting(name: &str, given: &[String]) -> String {
+    let fits = |candidate: &String| !given.contains(candidate);
+    let mut candidate = cut(name, NAME_LEN).to_string();
+    let mut n = 1;
+    while !fits(&candidate) {
+        n += 1;
+        let suffix = format!("_{n}");
+        candidate = format!("{}{suffix}", cut(name, NAME_LEN - suffix.len()));
+    }
+    candidate
 }
 
 #[cfg(test)]
@@ -651,5 +682,38 @@ mod tests {
             &["intensity", "intensity_2"],
         );
         assert_eq!(taken.into_attributes().0[0].name, "intensity_3");
+    }
+
+    /// Names past a description's 32 bytes are cut; two that differ only beyond them were
+    /// described under one name and read back as one attribute (the second's values lost).
+    #[test]
+    fn long_names_cut_to_fit_stay_apart() {
+        let long = "return_echo_amplitude_of_channel_";
+        let names = [format!("{long}1"), format!("{long}2"), format!("{long}3")];
+        let mut attributes: Vec<Attribute> = (names.iter().enumerate())
+            .map(|(k, name)| Attribute {
+                name: name.clone(),
+                kind: ScalarKind::U16,
+                values: vec![k as f64; 3],
+            })
+            .collect();
+        attributes.push(Attribute {
+            name: "return_echo_amplitude_of_chann_2".into(),
+            kind: ScalarKind::U8,
+            values: vec![9.0; 3],
+        });
+        let cloud = PointCloud {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            attributes,
+            ..PointCloud::default()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        write_cloud(&dir.path().join("out.las"), &cloud, None, Encoding::Binary).unwrap();
+        let back = read_cloud(&dir.path().join("out.las"), None).unwrap().cloud;
+        let read_as = |name: &str| values(&back, name).1[0];
+        assert_eq!(read_as("return_echo_amplitude_of_channel"), 0.0);
+        assert_eq!(read_as("return_echo_amplitude_of_chann_3"), 1.0);
+        assert_eq!(read_as("return_echo_amplitude_of_chann_4"), 2.0);
+        assert_eq!(read_as("return_echo_amplitude_of_chann_2"), 9.0);
     }
 }

@@ -191,17 +191,27 @@ fn a_reader_that_goes_away_ends_the_results_quietly() {
             write_cloud(&path, &line, None, Encoding::Binary).unwrap();
         }
     }
+    let (status, stderr) =
+        with_reader_gone(&["eval", "--pred-dir", s(&pred), "--gt-dir", s(&gt), "--json"]);
+    assert!(status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// Runs mvpcc with `args`, its standard output a pipe closed before anything is read; its exit
+/// status and what it said.
+fn with_reader_gone(args: &[&str]) -> (std::process::ExitStatus, String) {
     let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("mvpcc"))
-        .args(["eval", "--pred-dir", s(&pred), "--gt-dir", s(&gt), "--json"])
+        .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     drop(child.stdout.take());
     let done = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&done.stderr);
-    assert!(done.status.success(), "{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
+    (
+        done.status,
+        String::from_utf8_lossy(&done.stderr).into_owned(),
+    )
 }
 
 /// `mvpcc filter scan.ply /dev/stdout | head` ended with "cannot write: Broken pipe" and a
@@ -214,16 +224,9 @@ fn a_cloud_sent_to_a_reader_that_goes_away_ends_quietly() {
     let input = write(&dir, "car.ply", &car());
     for output in ["-", "/dev/stdout"] {
         for format in ["xyz", "las"] {
-            let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("mvpcc"))
-                .args(["filter", s(&input), output, "--out-format", format])
-                .stdout(std::process::Stdio::piped())
-                .stderr(std::process::Stdio::piped())
-                .spawn()
-                .unwrap();
-            drop(child.stdout.take());
-            let done = child.wait_with_output().unwrap();
-            let stderr = String::from_utf8_lossy(&done.stderr);
-            assert!(done.status.success(), "{output} {format}: {stderr}");
+            let (status, stderr) =
+                with_reader_gone(&["filter", s(&input), output, "--out-format", format]);
+            assert!(status.success(), "{output} {format}: {stderr}");
             assert!(!stderr.contains("error"), "{output} {format}: {stderr}");
         }
     }

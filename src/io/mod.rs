@@ -1,8 +1,7 @@
 //! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
 //! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it (a
 //! device or pipe is written into instead). `-` is standard input or output ([`stdio`]). A
-//! command stopped by a signal deletes the temporary files it was writing
-//! ([`remove_unfinished`]).
+//! command stopped by Ctrl-C deletes the temporary files it was writing ([`remove_unfinished`]).
 
 pub mod batch;
 mod las;
@@ -377,11 +376,14 @@ pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<Strin
     if cloud.viewpoint.is_some() && format != Format::Pcd {
         lost.push("its viewpoint is not written: only a PCD output holds one".to_string());
     }
+    if format != Format::Xyz {
+        return lost;
+    }
     let pts = xyz::is_pts(output);
     let dropped: Vec<&str> = (cloud.attributes.iter().map(|a| a.name.as_str()))
         .filter(|&name| !(pts && name == xyz::INTENSITY))
         .collect();
-    if !dropped.is_empty() && format == Format::Xyz {
+    if !dropped.is_empty() {
         lost.push(format!(
             "{} not written: XYZ text holds coordinates and colours only{} (PLY, PCD or LAS \
              keep them)",

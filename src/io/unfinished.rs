@@ -1,4 +1,4 @@
-//! Temporary files and folders still being written, so that a command stopped by a signal can
+//! Temporary files and folders still being written, so that a command stopped by Ctrl-C can
 //! delete them: tempfile deletes its files when they are dropped, and nothing is dropped when
 //! the process exits.
 

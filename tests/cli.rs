@@ -232,6 +232,16 @@ fn a_cloud_sent_to_a_reader_that_goes_away_ends_quietly() {
     }
 }
 
+/// Sends `signal` (`kill`'s `-INT`, `-HUP`…) to `child`.
+#[cfg(unix)]
+fn send(child: &std::process::Child, signal: &str) {
+    let id = child.id().to_string();
+    let sent = std::process::Command::new("kill")
+        .args([signal, &id])
+        .status();
+    assert!(sent.unwrap().success(), "kill {signal} {id}");
+}
+
 /// Ctrl-C left the temporary files a command was writing: a `.mvpcc-*.tmp` beside the output,
 /// or in the temporary folder the copy of standard input or the whole cloud for standard
 /// output. Each is caught here while it exists (the command blocked on a pipe that is neither
@@ -271,11 +281,7 @@ fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
         }
         // Past the file's creation and into the blocked read or write.
         std::thread::sleep(std::time::Duration::from_millis(300));
-        let id = child.id().to_string();
-        let killed = std::process::Command::new("kill")
-            .args(["-INT", &id])
-            .status();
-        assert!(killed.unwrap().success());
+        send(&child, "-INT");
         let done = child.wait_with_output().unwrap();
         drop(stdin);
         assert_eq!(done.status.code(), Some(130), "reads stdin: {reads_stdin}");
@@ -311,11 +317,7 @@ fn a_signal_the_parent_ignores_stays_ignored() {
     stdin.write_all(&ply[..1000]).unwrap();
     // Reading standard input when the hangup comes; `sh` has been replaced by mvpcc by then.
     std::thread::sleep(std::time::Duration::from_millis(300));
-    let id = child.id().to_string();
-    let hung_up = std::process::Command::new("kill")
-        .args(["-HUP", &id])
-        .status();
-    assert!(hung_up.unwrap().success());
+    send(&child, "-HUP");
     stdin.write_all(&ply[1000..]).unwrap();
     drop(stdin);
     let done = child.wait_with_output().unwrap();

@@ -287,7 +287,7 @@ left=$((deadline - $(date +%s) - margin))
 # The smoke test trains for half a minute however slow the machine it runs on is.
 $tiny && [ $left -lt 30 ] && left=30
 [ $left -gt 10 ] || { say "no time left to train"; exit 1; }
-# SIGINT is train's Ctrl-C: it checkpoints, validates the last step and draws its samples.
+# SIGINT is train's Ctrl-C: it checkpoints, then validates the last step and draws its samples.
 # timeout answers 124 when it sent the signal, whatever train then did; train's own status is
 # in its summary (train.json, "outcome": "interrupted"). --foreground: without it timeout
 # sends the signal to train and then to its whole process group, train among them, and a

@@ -242,19 +242,24 @@ fn send(child: &std::process::Child, signal: &str) {
     assert!(sent.unwrap().success(), "kill {signal} {id}");
 }
 
-/// Ctrl-C left the temporary files a command was writing: a `.mvpcc-*.tmp` beside the output,
-/// or in the temporary folder the copy of standard input or the whole cloud for standard
-/// output. Each is caught here while it exists (the command blocked on a pipe that is neither
-/// closed nor read), and the signal must remove it.
+/// Ctrl-C or SIGTERM left the temporary files a command was writing: a `.mvpcc-*.tmp` beside
+/// the output, or in the temporary folder the copy of standard input or the whole cloud for
+/// standard output. Each is caught here while it exists (the command blocked on a pipe that is
+/// neither closed nor read), and the signal must remove it, then end the command as it would
+/// have without a handler.
 #[cfg(unix)]
 #[test]
 fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
     use std::io::Write as _;
+    use std::os::unix::process::ExitStatusExt as _;
     use std::process::Stdio;
     let dir = TempDir::new().unwrap();
     let input = write(&dir, "car.ply", &car());
     let ply = std::fs::read(&input).unwrap();
-    for reads_stdin in [true, false] {
+    for ((signal, number), reads_stdin) in [("-INT", 2), ("-TERM", 15)]
+        .into_iter()
+        .flat_map(|s| [(s, true), (s, false)])
+    {
         let tmp = TempDir::new().unwrap();
         let output = dir.path().join("out.ply");
         let (from, to) = if reads_stdin {
@@ -274,21 +279,74 @@ fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
         if reads_stdin {
             stdin.write_all(&ply[..ply.len() / 2]).unwrap();
         }
-        let started = std::time::Instant::now();
-        while std::fs::read_dir(tmp.path()).unwrap().next().is_none() {
-            assert!(started.elapsed().as_secs() < 60, "no temporary file");
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        }
-        // Past the file's creation and into the blocked read or write.
-        std::thread::sleep(std::time::Duration::from_millis(300));
-        send(&child, "-INT");
+        wait_for_entry(tmp.path());
+        send(&child, signal);
         let done = child.wait_with_output().unwrap();
         drop(stdin);
-        assert_eq!(done.status.code(), Some(130), "reads stdin: {reads_stdin}");
+        let case = format!("{signal}, reads stdin: {reads_stdin}");
+        assert_eq!(done.status.signal(), Some(number), "{case}");
         let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
-        assert!(left.is_empty(), "{left:?}");
-        assert!(!output.exists());
+        assert!(left.is_empty(), "{case}: {left:?}");
+        assert!(!output.exists(), "{case}");
     }
+}
+
+/// Waits until something is in `dir`, then a little longer: past the creation of a command's
+/// temporary file and into its blocked read or write.
+#[cfg(unix)]
+fn wait_for_entry(dir: &Path) {
+    let started = std::time::Instant::now();
+    while std::fs::read_dir(dir).unwrap().next().is_none() {
+        assert!(started.elapsed().as_secs() < 60, "no temporary file");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+}
+
+/// Ctrl-C in a shell loop over files stops the loop, not just the file being done: bash goes
+/// on with its loop when the command exits (even with status 130) rather than dying of the
+/// signal. `env --default-signal` undoes a SIGINT the test runner's parent ignored, which the
+/// shell could not take back.
+#[cfg(target_os = "linux")]
+#[test]
+fn ctrl_c_stops_a_shell_loop() {
+    use std::os::unix::process::{CommandExt as _, ExitStatusExt as _};
+    use std::process::Stdio;
+    let tmp = TempDir::new().unwrap();
+    let (out, spool) = (tmp.path().join("out"), tmp.path().join("spool"));
+    std::fs::create_dir(&out).unwrap();
+    std::fs::create_dir(&spool).unwrap();
+    let mvpcc = assert_cmd::cargo::cargo_bin("mvpcc");
+    let mut child = std::process::Command::new("env")
+        .args(["--default-signal=INT", "bash", "-c"])
+        .arg(format!(
+            "for i in 1 2; do {} filter - {}/$i.ply; echo next; done",
+            mvpcc.display(),
+            out.display()
+        ))
+        .env("TMPDIR", &spool)
+        .process_group(0)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdin = child.stdin.take().unwrap();
+    wait_for_entry(&spool);
+    let group = format!("-{}", child.id());
+    let sent = std::process::Command::new("kill")
+        .args(["-INT", "--", &group])
+        .status();
+    assert!(sent.unwrap().success());
+    // A loop that goes on blocks on the same pipe: closed after a while, it lets the loop end.
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() && started.elapsed().as_secs() < 10 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    drop(stdin);
+    let done = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&done.stdout);
+    assert!(!stdout.contains("next"), "{stdout}");
+    assert_eq!(done.status.signal(), Some(2), "{:?}", done.status);
 }
 
 /// `nohup mvpcc …` must outlive the terminal it was started from: the SIGHUP it ignores stays

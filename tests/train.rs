@@ -516,45 +516,48 @@ fn a_diverging_loss_stops_the_run_and_keeps_the_last_good_checkpoint() {
     assert!(!run.join("generator.safetensors").exists());
 }
 
+/// Ctrl-C, or a scheduler's SIGTERM before its SIGKILL, ends a run with a checkpoint.
 #[cfg(unix)]
 #[test]
-fn ctrl_c_saves_a_checkpoint_and_the_run_resumes_from_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let run = dir.path().join("run");
-    let child = base_std(&run)
-        .args(["--config", "tiny"])
-        .args(["--batch", "1", "--val-every", "0", "--log-every", "1"])
-        .args(["--checkpoint-every", "100000"])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let log = run.join("log.jsonl");
-    let started = std::time::Instant::now();
-    while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("\"train\"")) {
-        assert!(started.elapsed().as_secs() < 120, "no training step logged");
-        std::thread::sleep(std::time::Duration::from_millis(50));
+fn a_stop_signal_saves_a_checkpoint_and_the_run_resumes_from_it() {
+    for signal in ["-INT", "-TERM"] {
+        let dir = tempfile::tempdir().unwrap();
+        let run = dir.path().join("run");
+        let child = base_std(&run)
+            .args(["--config", "tiny"])
+            .args(["--batch", "1", "--val-every", "0", "--log-every", "1"])
+            .args(["--checkpoint-every", "100000"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let log = run.join("log.jsonl");
+        let started = std::time::Instant::now();
+        while !std::fs::read_to_string(&log).is_ok_and(|t| t.contains("\"train\"")) {
+            assert!(started.elapsed().as_secs() < 120, "no training step logged");
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        let status = std::process::Command::new("kill")
+            .args([signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{signal}: {stderr}");
+        assert!(stderr.contains("interrupted at step"), "{signal}: {stderr}");
+        assert!(run.join("generator.safetensors").is_file());
+        let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
+        let step: u64 = latest.trim().trim_start_matches("step-").parse().unwrap();
+        base(&run)
+            .args(["--resume", "--steps"])
+            .arg((step + 1).to_string())
+            .assert()
+            .success()
+            .stderr(predicate::str::contains(format!(
+                "stopped at step {}",
+                step + 1
+            )));
     }
-    let status = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let output = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
-    assert!(stderr.contains("interrupted at step"), "{stderr}");
-    assert!(run.join("generator.safetensors").is_file());
-    let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
-    let step: u64 = latest.trim().trim_start_matches("step-").parse().unwrap();
-    base(&run)
-        .args(["--resume", "--steps"])
-        .arg((step + 1).to_string())
-        .assert()
-        .success()
-        .stderr(predicate::str::contains(format!(
-            "stopped at step {}",
-            step + 1
-        )));
 }
 
 /// Starts `train` into `run` and kills it with SIGKILL as soon as `ready` holds (polled without

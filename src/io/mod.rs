@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use stdio::{is_stdio, is_stream, spooled, write_stdout, write_whole_into};
 use thiserror::Error;
 pub use unfinished::remove_unfinished;
-use unfinished::{track, Tracked};
+pub(crate) use unfinished::{track, Tracked};
 
 /// Point cloud file formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -121,6 +121,8 @@ pub fn save(
     let dir = root.join(&name);
     let tmp = root.join(format!(".tmp-{name}"));
     std::fs::create_dir_all(&tmp).map_err(io_error(&tmp))?;
+    // A second Ctrl-C while it is written deletes it; only a kill leaves it to `--resume`.
+    let _unfinished = crate::io::track(&tmp);
     let [g_optim, d_optim] = gan.optimizer_bytes().map_err(|e| invalid(&tmp, e))?;
     write(&tmp.join(GENERATOR), &module_bytes(&gan.generator, &tmp)?)?;
     write(

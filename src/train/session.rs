@@ -254,8 +254,8 @@ impl<'a> Session<'a> {
         Ok(())
     }
 
-    /// Validates the last step (however the run ended, so a short run still shows where it got
-    /// to), checkpoints it, and writes the run's weights and curves.
+    /// Checkpoints the last step and writes the run's weights, then validates it (however the
+    /// run ended, so a short run still shows where it got to) and draws the curves.
     pub(super) fn finish(
         mut self,
         outcome: Outcome,
@@ -263,6 +263,19 @@ impl<'a> Session<'a> {
     ) -> Result<Summary, TrainError> {
         let (settings, run) = (&self.job.settings, &self.job.run);
         let state = &self.state;
+        // Saved before the last validation: a scheduler's SIGKILL may follow its SIGTERM soon.
+        let dir = match &self.last_checkpoint {
+            Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
+            _ => checkpoint::save(run, &self.gan, state, settings.keep)?,
+        };
+        for name in [GENERATOR_WEIGHTS, DISCRIMINATOR_WEIGHTS] {
+            let weights = run.join(name);
+            // Copied whole or not at all, so a kill here leaves no cut-off weights file.
+            atomic_write(&weights, |w| {
+                std::io::copy(&mut std::fs::File::open(dir.join(name))?, w).map(|_| ())
+            })
+            .map_err(io_err(&weights))?;
+        }
         let validated = self
             .log
             .records
@@ -280,18 +293,6 @@ impl<'a> Session<'a> {
                 .min(settings.stage_rates.len().saturating_sub(1));
             let at = (state.step, stage);
             self.last = Some(v.run_logged(&self.gan, run, at, monitor, &mut self.log)?);
-        }
-        let dir = match &self.last_checkpoint {
-            Some(dir) if dir.ends_with(format!("step-{:08}", state.step)) => dir.clone(),
-            _ => checkpoint::save(run, &self.gan, state, settings.keep)?,
-        };
-        for name in [GENERATOR_WEIGHTS, DISCRIMINATOR_WEIGHTS] {
-            let weights = run.join(name);
-            // Copied whole or not at all, so a kill here leaves no cut-off weights file.
-            atomic_write(&weights, |w| {
-                std::io::copy(&mut std::fs::File::open(dir.join(name))?, w).map(|_| ())
-            })
-            .map_err(io_err(&weights))?;
         }
         self.log.draw(run)?;
         Ok(Summary {

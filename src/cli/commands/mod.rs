@@ -45,7 +45,7 @@ fn model_shape(name: &str) -> anyhow::Result<ModelConfig> {
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    crate::cli::interrupt::install().context("cannot install the Ctrl-C handler")?;
+    crate::cli::interrupt::install().context("cannot install the signal handler")?;
     let log = Log {
         quiet: cli.quiet,
         silent: false,

@@ -289,7 +289,8 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     let mut fields = Columns::new();
     let described = extra_bytes::described(&header);
     check_fields(declared, described.len())?;
-    let mut extra = extra_bytes::Columns::new(described, &FIELDS.map(|f| f.0));
+    let mut extra =
+        extra_bytes::Columns::new(described, &record_fields(header.point_format().has_nir));
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
@@ -408,9 +409,19 @@ const FIELDS: [(&str, ScalarKind); 12] = [
     ("point_source_id", ScalarKind::U16),
     ("gps_time", ScalarKind::F64),
     ("scanner_channel", ScalarKind::U8),
-    ("nir", ScalarKind::U16),
+    (NIR, ScalarKind::U16),
     ("overlap", ScalarKind::U8),
 ];
+
+const NIR: &str = "nir";
+
+/// The [`FIELDS`] a point record holds: NIR only in the formats that also hold colour, so that
+/// a cloud with NIR and no colour keeps it in extra bytes rather than gaining black colours.
+fn record_fields(has_nir: bool) -> Vec<&'static str> {
+    (FIELDS.iter().map(|f| f.0))
+        .filter(|&name| has_nir || name != NIR)
+        .collect()
+}
 
 /// One point's [`FIELDS`] from the point and its `record`'s bytes; the scan angle in degrees,
 /// GPS time and NIR 0 where the format has none. LAS 1.4's formats (`extended`) keep the
@@ -558,7 +569,7 @@ const MAX_CHANNEL: u8 = 3;
 /// LAS 1.2 with point format 0 (1 with GPS time, 2 with colour, 3 with both), which every reader
 /// takes; LAS 1.4 with format 6 (or 7 with colour; both with GPS time) where a classification
 /// code, a return number, a scan angle or a scanner channel needs more than the older formats
-/// give it, and format 8 (colour and NIR) for a near-infrared channel.
+/// give it, and format 8 (colour and NIR) for a near-infrared channel beside colour.
 fn version_and_format(color: bool, gps_time: bool, wide: bool, nir: bool) -> (Builder, Format) {
     let (version, number) = if nir {
         ((1, 4), 8)
@@ -607,7 +618,7 @@ fn header_for(
             .iter()
             .any(|r| r.data.len() > usize::from(u16::MAX));
     let gps_time = cloud.attribute("gps_time").is_some();
-    let nir = cloud.attribute("nir").is_some();
+    let nir = cloud.colors.is_some() && cloud.attribute(NIR).is_some();
     let (mut builder, mut format) = version_and_format(cloud.colors.is_some(), gps_time, wide, nir);
     format.is_compressed = compressed;
     if extra.fields() > extra_bytes::MAX_FIELDS
@@ -701,7 +712,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
     if cloud.is_empty() {
         return Err(Problem::NoPoints);
     }
-    let extra = extra_bytes::Layout::new(cloud, &FIELDS.map(|f| f.0));
+    let extra = extra_bytes::Layout::new(cloud, &record_fields(cloud.colors.is_some()));
     let header = header_for(cloud, &extra, compressed)?;
     let format = *header.point_format();
     let columns = FIELDS.map(|(name, _)| cloud.attribute(name));

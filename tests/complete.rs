@@ -716,6 +716,39 @@ fn shards_split_a_folder_exactly_and_skip_existing_redoes_nothing() {
         .stderr(predicate::str::contains("counted from 0"));
 }
 
+/// A batch written to XYZ said for every file that the `synthetic` flag is lost; a warning the
+/// files share is said once, naming them, and the JSON keeps each file's.
+#[test]
+fn a_warning_shared_by_a_batch_is_said_once() {
+    let dir = TempDir::new().unwrap();
+    let model = tiny_model(&dir);
+    let inputs = dir.path().join("in");
+    std::fs::create_dir(&inputs).unwrap();
+    for (i, name) in ["a", "b", "c", "d"].into_iter().enumerate() {
+        let path = inputs.join(format!("{name}.ply"));
+        write_cloud(&path, &scan(i as u64), None, Encoding::Binary).unwrap();
+    }
+    let outputs = dir.path().join("out");
+    let assert = complete_dir(&inputs, &outputs)
+        .args(["--model", s(&model), "--out-format", "xyz", "--json"])
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr);
+    let lost = "attribute synthetic is not written";
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(lost)).collect();
+    let first_two = format!("{}, {}", s(&inputs.join("a.ply")), s(&inputs.join("b.ply")));
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert!(
+        lines[0].starts_with(&format!("warning: {first_two} and 2 more files: {lost}")),
+        "{stderr}"
+    );
+    let report: serde_json::Value = serde_json::from_slice(&assert.get_output().stdout).unwrap();
+    for result in report["results"].as_array().unwrap() {
+        let warnings = result["warnings"].as_array().unwrap();
+        assert!(warnings.iter().any(|w| w.as_str().unwrap().contains(lost)));
+    }
+}
+
 #[test]
 fn odd_inputs_warn_and_tiny_ones_fail_cleanly() {
     let dir = TempDir::new().unwrap();

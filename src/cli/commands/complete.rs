@@ -24,7 +24,7 @@ use mvpcc::model::inpaint::Inpainter;
 use mvpcc::model::weights::generator_in;
 use mvpcc::views::write_views;
 use serde::Serialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -685,15 +685,11 @@ fn batch(args: &CompleteArgs, completer: &Completer, log: Log) -> anyhow::Result
 
 /// Counts the outcomes and says what went wrong with each file on stderr.
 fn summarize(args: &CompleteArgs, results: Vec<BatchEntry>, log: Log) -> BatchReport {
+    warn_once(&results, log);
     let (mut completed, mut skipped, mut failed) = (0, 0, 0);
     for entry in &results {
         match entry {
-            BatchEntry::Completed(report) => {
-                completed += 1;
-                for w in &report.warnings {
-                    log.warn(format!("{}: {w}", report.input.display()));
-                }
-            }
+            BatchEntry::Completed(_) => completed += 1,
             BatchEntry::Skipped { .. } => skipped += 1,
             BatchEntry::Failed { error, .. } => {
                 failed += 1;
@@ -708,6 +704,39 @@ fn summarize(args: &CompleteArgs, results: Vec<BatchEntry>, log: Log) -> BatchRe
         skipped,
         failed,
         results,
+    }
+}
+
+/// Each warning of the completed files once, naming the files it concerns: a batch written to
+/// XYZ would otherwise say for every file that the `synthetic` flag is lost. The JSON report
+/// keeps each file's own.
+fn warn_once(results: &[BatchEntry], log: Log) {
+    let mut groups: Vec<(&str, Vec<&Path>)> = Vec::new();
+    let mut index: HashMap<&str, usize> = HashMap::new();
+    for entry in results {
+        let BatchEntry::Completed(report) = entry else {
+            continue;
+        };
+        for warning in &report.warnings {
+            let i = *index.entry(warning.as_str()).or_insert_with(|| {
+                groups.push((warning.as_str(), Vec::new()));
+                groups.len() - 1
+            });
+            groups[i].1.push(&report.input);
+        }
+    }
+    for (warning, files) in groups {
+        log.warn(format!("{}: {warning}", files_named(&files)));
+    }
+}
+
+/// "a.ply", "a.ply and b.ply", "a.ply, b.ply and c.ply", "a.ply, b.ply and 5 more files".
+fn files_named(files: &[&Path]) -> String {
+    let name = |i: usize| files[i].display().to_string();
+    match files.len() {
+        0..=2 => (0..files.len()).map(name).collect::<Vec<_>>().join(" and "),
+        3 => format!("{}, {} and {}", name(0), name(1), name(2)),
+        n => format!("{}, {} and {} more files", name(0), name(1), n - 2),
     }
 }
 
@@ -734,6 +763,16 @@ mod tests {
             panic!("parsed as another command");
         };
         assert_eq!(options(&args, Path::new("in.ply")), Options::default());
+    }
+
+    #[test]
+    fn files_are_named_up_to_two_then_counted() {
+        let paths = ["a", "b", "c", "d", "e"].map(Path::new);
+        let named = |n: usize| files_named(&paths[..n]);
+        assert_eq!(named(1), "a");
+        assert_eq!(named(2), "a and b");
+        assert_eq!(named(3), "a, b and c");
+        assert_eq!(named(5), "a, b and 3 more files");
     }
 
     #[test]

@@ -248,6 +248,7 @@ fn a_las_scan_keeps_its_coordinate_system_and_record_fields() {
         standard_gps_time: true,
         file_source_id: 3,
         system_identifier: "MLS van".into(),
+        ..Default::default()
     };
     cloud.extra_bytes = vec![mvpcc::core::cloud::StoredField {
         name: "Reflectance".into(),

@@ -65,6 +65,9 @@ pub struct LasSource {
     pub file_source_id: u16,
     /// The system identifier: the hardware or process that produced the points.
     pub system_identifier: String,
+    /// Whether its points point into full-waveform data (formats 4, 5, 9 and 10), which no
+    /// output carries.
+    pub waveform: bool,
 }
 
 /// How a LAS input stored one of its extra-bytes fields (the attribute of the same name), kept

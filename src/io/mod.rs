@@ -362,8 +362,8 @@ pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) 
 }
 
 /// What `cloud` holds that a `format` file at `output` has no place for, one warning each: a LAS
-/// input's coordinate reference system (only LAS and LAZ store one), a PCD input's viewpoint
-/// (only PCD), and attributes in XYZ text, which holds coordinates and colours only (and PTS
+/// input's coordinate reference system (only LAS and LAZ store one) and full-waveform packets
+/// (none), a PCD input's viewpoint (only PCD), and attributes in XYZ text, which holds coordinates and colours only (and PTS
 /// the intensity; completed points lose their `synthetic` flag there).
 pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<String> {
     let mut lost = Vec::new();
@@ -371,6 +371,11 @@ pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<Strin
         lost.push(
             "its coordinate reference system is not written: only a LAS or LAZ output holds one"
                 .to_string(),
+        );
+    }
+    if cloud.las_source.waveform {
+        lost.push(
+            "its waveform packets are not written: mvpcc writes no waveform data".to_string(),
         );
     }
     if cloud.viewpoint.is_some() && format != Format::Pcd {
@@ -945,6 +950,38 @@ mod tests {
         }
     }
 
+    /// Full-waveform scans (formats 4, 5, 9, 10) point each return into waveform packets that no
+    /// output carries: the loss was silent.
+    #[test]
+    fn waveform_packets_are_said_to_be_lost() {
+        let dir = tempfile::tempdir().unwrap();
+        for (format, index) in [(4, 1), (9, 1), (4, 0)] {
+            let path = dir.path().join(format!("waveform{format}-{index}.las"));
+            let mut builder = ::las::Builder::from((1, 4));
+            builder.point_format = ::las::point::Format::new(format).unwrap();
+            let header = builder.into_header().unwrap();
+            let mut writer = ::las::Writer::from_path(&path, header).unwrap();
+            for k in 0..3 {
+                let point = ::las::Point {
+                    x: k as f64,
+                    gps_time: Some(0.0),
+                    waveform: Some(::las::raw::point::Waveform {
+                        wave_packet_descriptor_index: index,
+                        byte_offset_to_waveform_data: 100 * k,
+                        waveform_packet_size_in_bytes: 100,
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                };
+                writer.write_point(point).unwrap();
+            }
+            writer.close().unwrap();
+            let cloud = read_cloud(&path, None).unwrap().cloud;
+            let lost = unwritten(&cloud, Format::Las, Path::new("out.las")).join(" | ");
+            assert_eq!(lost.contains("waveform"), index != 0, "{format}: {lost}");
+        }
+    }
+
     /// The header's GPS time type says what `gps_time` counts (week seconds or adjusted
     /// standard time); it was written as week seconds whatever the input said, so an MLS scan's
     /// standard times changed meaning. It, the file source ID (the trajectory) and the system
@@ -955,6 +992,7 @@ mod tests {
             standard_gps_time: true,
             file_source_id: 7,
             system_identifier: "RIEGL VMX-2HA".into(),
+            ..Default::default()
         };
         let mut cloud = PointCloud {
             las_source: source.clone(),

@@ -291,6 +291,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     check_fields(declared, described.len())?;
     let mut extra =
         extra_bytes::Columns::new(described, &record_fields(header.point_format().has_nir));
+    let mut waveform = false;
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
@@ -307,6 +308,10 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
             }
             fields.push(field_values(&p, record, data.format().is_extended));
             extra.push(&p.extra_bytes);
+            // Index 0 says the point has no waveform packet.
+            waveform |= p
+                .waveform
+                .is_some_and(|w| w.wave_packet_descriptor_index != 0);
         }
     }
     let n = positions.len();
@@ -328,6 +333,7 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
             standard_gps_time: header.gps_time_type().is_standard(),
             file_source_id: header.file_source_id(),
             system_identifier: header.system_identifier().to_string(),
+            waveform,
         },
         viewpoint: None,
     })

@@ -719,6 +719,14 @@ fn bad_inputs_fail_cleanly() {
         "is a directory",
         &out,
     );
+    // Without an extension they were said to have an unsupported one.
+    let (folder, nothing) = (dir.path().join("scans"), dir.path().join("nothing"));
+    std::fs::create_dir(&folder).unwrap();
+    fails(&["filter", s(&folder), o], "scans", "is a directory", &out);
+    fails(&["filter", s(&nothing), o], "nothing", "no such file", &out);
+    let hint = "is a directory; complete a folder with --input-dir";
+    fails(&["complete", s(&folder), o], "scans", hint, &out);
+    fails(&["complete", s(&folder), s(&subdir)], "scans", hint, &out);
 
     let cases: [(&str, &[u8], &str); 7] = [
         ("empty.pcd", b"", "empty"),

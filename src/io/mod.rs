@@ -261,10 +261,7 @@ pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIo
         let (copy, _) = spooled(path).map_err(err)?;
         return read_cloud(&copy, Some(format)).map_err(|e| err(e.problem));
     }
-    let format = match format {
-        Some(f) => f,
-        None => Format::from_path(path).map_err(err)?,
-    };
+    // Before the extension: a folder or a missing file is said as such whatever its name.
     let meta = std::fs::metadata(path).map_err(|e| {
         err(if e.kind() == std::io::ErrorKind::NotFound {
             Problem::NotFound
@@ -275,6 +272,10 @@ pub fn read_cloud(path: &Path, format: Option<Format>) -> Result<Loaded, CloudIo
     if meta.is_dir() {
         return Err(err(Problem::IsDirectory));
     }
+    let format = match format {
+        Some(f) => f,
+        None => Format::from_path(path).map_err(err)?,
+    };
     if meta.len() == 0 {
         return Err(err(Problem::EmptyFile));
     }

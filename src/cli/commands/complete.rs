@@ -307,6 +307,12 @@ fn check_paths(
     views: Option<&Path>,
     args: &CompleteArgs,
 ) -> anyhow::Result<()> {
+    if input.is_dir() {
+        bail!(
+            "{}: is a directory; complete a folder with --input-dir {0} --output-dir OUT",
+            input.display()
+        );
+    }
     check_output(output, &[input])?;
     if is_stdio(output) && args.json {
         bail!("-: --json and the completed cloud cannot both go to standard output");

@@ -478,6 +478,20 @@ fn eval_over_directories_matches_by_path_without_extension() {
         "not a data directory from `mvpcc prepare` (no manifest.json",
         &dir.path().join("none"),
     );
+    // Folders given where files are meant: --pred and --gt name one pair.
+    let a_file = pred.join("sub/b.pcd");
+    fails(
+        &["eval", "--pred", s(&pred), "--gt", s(&a_file)],
+        s(&pred),
+        "is a directory; score folders with --pred-dir and --gt-dir (this one as --pred-dir)",
+        &dir.path().join("none"),
+    );
+    fails(
+        &["eval", "--pred", s(&a_file), "--gt", s(&gt)],
+        s(&gt),
+        "(this one as --gt-dir)",
+        &dir.path().join("none"),
+    );
 }
 
 #[test]

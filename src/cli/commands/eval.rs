@@ -562,6 +562,26 @@ fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
 }
 
 /// CD and F-scores of `--pred`/`--gt` or of matched files in `--pred-dir`/`--gt-dir`.
+/// `--pred` and `--gt`, which name files: a folder is meant for `--pred-dir` / `--gt-dir`.
+fn one_pair(pred: &Path, gt: &Path) -> anyhow::Result<Pair> {
+    for (path, flag) in [(pred, "--pred-dir"), (gt, "--gt-dir")] {
+        if path.is_dir() {
+            bail!(
+                "{}: is a directory; score folders with --pred-dir and --gt-dir (this one as \
+                 {flag})",
+                path.display()
+            );
+        }
+    }
+    Ok(Pair {
+        name: pred
+            .file_stem()
+            .map_or("pred".into(), |s| s.to_string_lossy().into_owned()),
+        pred: pred.to_path_buf(),
+        gt: gt.to_path_buf(),
+    })
+}
+
 fn eval_clouds(
     args: &EvalArgs,
     log: Log,
@@ -569,13 +589,7 @@ fn eval_clouds(
     table: &mut Table,
 ) -> anyhow::Result<()> {
     let pairs = match (&args.pred, &args.gt, &args.pred_dir, &args.gt_dir) {
-        (Some(pred), Some(gt), _, _) => vec![Pair {
-            name: pred
-                .file_stem()
-                .map_or("pred".into(), |s| s.to_string_lossy().into_owned()),
-            pred: pred.clone(),
-            gt: gt.clone(),
-        }],
+        (Some(pred), Some(gt), _, _) => vec![one_pair(pred, gt)?],
         (_, _, Some(pd), Some(gd)) => matched_pairs(pd, gd, args.input.format)?,
         _ => unreachable!("checked: clouds were given"),
     };

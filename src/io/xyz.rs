@@ -1,5 +1,6 @@
-//! XYZ text: one point a line, its numbers separated by whitespace or commas; `#` comments
-//! are skipped. A header line before the points names the columns (`x y z r g b intensity`,
+//! XYZ text: one point a line, its numbers separated by whitespace or commas, or by
+//! semicolons with decimal points or commas (as spreadsheets write CSV where the comma is the
+//! decimal mark); `#` comments are skipped. A header line before the points names the columns (`x y z r g b intensity`,
 //! CloudCompare's `//X,Y,Z,R,G,B,…`); without one, the columns are read by their count
 //! ([`Layout::by_count`]). A first line holding one count, as PTS files begin, is skipped.
 
@@ -123,8 +124,11 @@ fn table(text: &str) -> Result<Table, Problem> {
         }
         let at = |problem: String| Problem::Malformed(format!("line {}: {problem}", line_no + 1));
         if let Err(tok) = parse_values(line, &mut row) {
-            // A column-name line before the first point is a header, not an error.
-            if columns.is_none() && !tok.starts_with(|c: char| c.is_ascii_digit()) {
+            // A column-name line before the first point is a header, not an error; one that
+            // begins like a number is a point that could not be read.
+            if columns.is_none()
+                && tok.starts_with(|c: char| c.is_alphabetic() || "/_\"'".contains(c))
+            {
                 header = Some(names(line));
                 continue;
             }
@@ -168,16 +172,17 @@ fn table(text: &str) -> Result<Table, Problem> {
     })
 }
 
-/// A header line's names: separated by commas where it has any (names may hold spaces then,
-/// which become `_`), else by whitespace; without quotes or CloudCompare's leading `//`; a name
+/// A header line's names: separated by semicolons or else commas where it has any (names may
+/// hold spaces then, which become `_`), else by whitespace; without quotes or CloudCompare's leading `//`; a name
 /// that comes again gets a number.
 fn names(line: &str) -> Vec<String> {
     let line = line.trim_start_matches('/');
-    let tokens: Vec<&str> = if line.contains(',') {
-        line.split(',').collect()
-    } else {
-        line.split_whitespace().collect()
-    };
+    let tokens: Vec<&str> =
+        if let Some(separator) = [';', ','].into_iter().find(|&s| line.contains(s)) {
+            line.split(separator).collect()
+        } else {
+            line.split_whitespace().collect()
+        };
     let mut names: Vec<String> = Vec::with_capacity(tokens.len());
     for token in tokens.into_iter().filter(|t| !t.trim().is_empty()) {
         let base: String = token
@@ -273,10 +278,18 @@ fn short(v: f64) -> bool {
     digits / 10f64.powi(shift) == v
 }
 
-/// The numbers of one line, separated by whitespace or commas, into `values`; the first token
-/// that is not a number is the error.
+/// The numbers of one line into `values`: separated by semicolons where it has any (a comma is
+/// then a decimal mark), else by whitespace or commas; the first token that is not a number is
+/// the error.
 fn parse_values<'a>(line: &'a str, values: &mut Vec<f64>) -> Result<(), &'a str> {
     values.clear();
+    if line.contains(';') {
+        for tok in line.split(';').map(str::trim).filter(|t| !t.is_empty()) {
+            let number = tok.parse().or_else(|_| tok.replacen(',', ".", 1).parse());
+            values.push(number.map_err(|_| tok)?);
+        }
+        return Ok(());
+    }
     for tok in line
         .split(|c: char| c == ',' || c.is_whitespace())
         .filter(|t| !t.is_empty())
@@ -433,9 +446,20 @@ mod tests {
         );
     }
 
+    /// Semicolon-separated CSV, as spreadsheets write it where the comma is the decimal mark,
+    /// was read as one header line after another and said to contain no points.
+    #[test]
+    fn semicolons_separate_values_that_may_have_decimal_commas() {
+        let c = read_str("X;Y;Z;Intensity\n-1,5;2.25;3;7\n4;-0,125 ; 6;8\n").unwrap();
+        assert_eq!(c.positions, vec![[-1.5, 2.25, 3.0], [4.0, -0.125, 6.0]]);
+        assert_eq!(column(&c, "Intensity").1, [7.0, 8.0]);
+    }
+
     #[test]
     fn bad_tokens_and_ragged_lines_are_errors_naming_the_line() {
         for (text, problem) in [
+            ("-1|2|3\n", "line 1: \"-1|2|3\" is not a number"),
+            ("1;2,5,0;3\n", "line 1: \"2,5,0\" is not a number"),
             ("1 2 3\n4 five 6\n", "line 2: \"five\" is not a number"),
             (
                 "1 2 3\n4 5 6 7 8 9\n",

@@ -278,25 +278,46 @@ fn short(v: f64) -> bool {
     digits / 10f64.powi(shift) == v
 }
 
-/// The numbers of one line into `values`: separated by semicolons where it has any (a comma is
-/// then a decimal mark), else by whitespace or commas; the first token that is not a number is
-/// the error.
+/// The numbers of one line into `values`: separated by semicolons where it has any, else by
+/// whitespace where [`decimal_commas`] says its commas are decimal marks, else by whitespace or
+/// commas; the first token that is not a number is the error.
 fn parse_values<'a>(line: &'a str, values: &mut Vec<f64>) -> Result<(), &'a str> {
     values.clear();
-    if line.contains(';') {
-        for tok in line.split(';').map(str::trim).filter(|t| !t.is_empty()) {
-            let number = tok.parse().or_else(|_| tok.replacen(',', ".", 1).parse());
-            values.push(number.map_err(|_| tok)?);
-        }
-        return Ok(());
-    }
+    let semicolons = line.contains(';');
+    let comma_decimals = semicolons || decimal_commas(line);
+    let separates = |c: char| match (semicolons, comma_decimals) {
+        (true, _) => c == ';',
+        (false, true) => c.is_whitespace(),
+        (false, false) => c == ',' || c.is_whitespace(),
+    };
     for tok in line
-        .split(|c: char| c == ',' || c.is_whitespace())
+        .split(separates)
+        .map(str::trim)
         .filter(|t| !t.is_empty())
     {
-        values.push(tok.parse::<f64>().map_err(|_| tok)?);
+        let number = match tok.parse() {
+            Err(_) if comma_decimals => tok.replacen(',', ".", 1).parse(),
+            parsed => parsed,
+        };
+        values.push(number.map_err(|_| tok)?);
     }
     Ok(())
+}
+
+/// Whether a line separated by whitespace writes its decimals with commas (`1,5 -2,25 3`): three
+/// words or more, one with a comma at least, and every comma alone in its word between two
+/// digits. Read as separators, such commas would make six numbers of three, silently.
+fn decimal_commas(line: &str) -> bool {
+    let decimal = |word: &str| {
+        word.split_once(',').is_none_or(|(whole, fraction)| {
+            whole.ends_with(|c: char| c.is_ascii_digit())
+                && fraction.starts_with(|c: char| c.is_ascii_digit())
+                && !fraction.contains(',')
+        })
+    };
+    line.contains(',')
+        && line.split_whitespace().nth(2).is_some()
+        && line.split_whitespace().all(decimal)
 }
 
 /// Colours are 0–255, unless every value lies in [0, 1] and one is fractional.
@@ -447,12 +468,18 @@ mod tests {
     }
 
     /// Semicolon-separated CSV, as spreadsheets write it where the comma is the decimal mark,
-    /// was read as one header line after another and said to contain no points.
+    /// was read as one header line after another and said to contain no points; decimal commas
+    /// between tabs or spaces were taken for separators.
     #[test]
     fn semicolons_separate_values_that_may_have_decimal_commas() {
         let c = read_str("X;Y;Z;Intensity\n-1,5;2.25;3;7\n4;-0,125 ; 6;8\n").unwrap();
         assert_eq!(c.positions, vec![[-1.5, 2.25, 3.0], [4.0, -0.125, 6.0]]);
         assert_eq!(column(&c, "Intensity").1, [7.0, 8.0]);
+        // The same with tabs: each comma was a separator, so three numbers were read as six.
+        let c = read_str("1,5\t-2,25\t3\n4\t-0,125\t6,0\n").unwrap();
+        assert_eq!(c.positions, vec![[1.5, -2.25, 3.0], [4.0, -0.125, 6.0]]);
+        let c = read_str("1, 2, 3\n1,2,3\n").unwrap();
+        assert_eq!(c.positions, vec![[1.0, 2.0, 3.0]; 2]);
     }
 
     #[test]

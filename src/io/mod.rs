@@ -364,7 +364,8 @@ pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) 
 
 /// What `cloud` holds that a `format` file at `output` has no place for, one warning each: a LAS
 /// input's coordinate reference system (only LAS and LAZ store one) and full-waveform packets
-/// (none), a PCD input's viewpoint (only PCD), and attributes in XYZ text, which holds coordinates and colours only (and PTS
+/// (none), a PCD input's viewpoint (only PCD), record fields whose values LAS cannot hold (an
+/// intensity from 0 to 1), and attributes in XYZ text, which holds coordinates and colours only (and PTS
 /// the intensity; completed points lose their `synthetic` flag there).
 pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<String> {
     let mut lost = Vec::new();
@@ -381,6 +382,9 @@ pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<Strin
     }
     if cloud.viewpoint.is_some() && format != Format::Pcd {
         lost.push("its viewpoint is not written: only a PCD output holds one".to_string());
+    }
+    if matches!(format, Format::Las | Format::Laz) {
+        lost.extend(las::clipped(cloud));
     }
     if format != Format::Xyz {
         return lost;
@@ -949,6 +953,43 @@ mod tests {
                 assert_eq!(values(&back, name), values(&cloud, name), "{name} {ext}");
             }
         }
+    }
+
+    /// A PLY's float intensity from 0 to 1, or PTS's from −2048 to 2047, became 0 and 1 (or 0) in
+    /// a LAS output's 16-bit field without a word.
+    #[test]
+    fn record_fields_las_cannot_hold_are_named() {
+        let mut cloud = colored_cloud(false);
+        let n = cloud.len();
+        let lost = |cloud: &PointCloud| unwritten(cloud, Format::Las, Path::new("out.las"));
+        for (values, clipped) in [
+            (
+                (0..n).map(|i| i as f64 / n as f64).collect::<Vec<_>>(),
+                true,
+            ),
+            ((0..n).map(|i| i as f64 - 2048.0).collect(), true),
+            (vec![65_536.0; n], true),
+            ((0..n).map(|i| (i * 7) as f64).collect(), false),
+        ] {
+            cloud.attributes = vec![Attribute {
+                name: "intensity".into(),
+                kind: ScalarKind::F32,
+                values,
+            }];
+            let warnings = lost(&cloud).join(" | ");
+            assert_eq!(
+                warnings.contains("intensity is written as a whole number from 0 to 65535"),
+                clipped,
+                "{warnings}"
+            );
+            assert!(unwritten(&cloud, Format::Ply, Path::new("out.ply")).is_empty());
+        }
+        cloud.attributes[0].name = "user_data".into();
+        cloud.attributes[0].values = vec![300.0; n];
+        let warnings = lost(&cloud).join(" | ");
+        let says = "user_data is written as a whole number from 0 to 255 in LAS: its values, \
+                    from 300 to 300, are clipped";
+        assert!(warnings.contains(says), "{warnings}");
     }
 
     /// Full-waveform scans (formats 4, 5, 9, 10) point each return into waveform packets that no

@@ -282,16 +282,10 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         scale: [t.x.scale, t.y.scale, t.z.scale],
         offset: [t.x.offset, t.y.offset, t.z.offset],
     };
-    let has_color = header.point_format().has_color;
-    let batch = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
-    let mut positions = Vec::new();
-    let mut colors16 = Vec::new();
-    let mut fields = Columns::new();
     let described = extra_bytes::described(&header);
     check_fields(declared, described.len())?;
-    let mut extra =
-        extra_bytes::Columns::new(described, &record_fields(header.point_format().has_nir));
-    let mut waveform = false;
+    let mut points = Points::new(&header, described);
+    let batch = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
@@ -301,42 +295,73 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
         }
         let records = data.raw_bytes().chunks_exact(data.record_len());
         for (p, record) in data.points().zip(records) {
-            let p = p.map_err(problem)?;
-            positions.push([p.x, p.y, p.z]);
-            if let Some(c) = p.color {
-                colors16.push([c.red, c.green, c.blue]);
-            }
-            fields.push(field_values(&p, record, data.format().is_extended));
-            extra.push(&p.extra_bytes);
-            // Index 0 says the point has no waveform packet.
-            waveform |= p
-                .waveform
-                .is_some_and(|w| w.wave_packet_descriptor_index != 0);
+            points.push(&p.map_err(problem)?, record, data.format().is_extended);
         }
     }
-    let n = positions.len();
-    if n < declared {
-        return Err(Problem::Truncated { declared, found: n });
+    let found = points.positions.len();
+    if found < declared {
+        return Err(Problem::Truncated { declared, found });
     }
-    let colors = (has_color && colors16.len() == n).then(|| eight_bit(&colors16));
-    let mut attributes = fields.into_attributes();
-    let (more, extra_bytes) = extra.into_attributes();
-    attributes.extend(more);
-    Ok(PointCloud {
-        positions,
-        colors,
-        attributes,
-        quantization: Some(quantization),
-        crs: crs_records(&header),
-        extra_bytes,
-        las_source: LasSource {
-            standard_gps_time: header.gps_time_type().is_standard(),
-            file_source_id: header.file_source_id(),
-            system_identifier: header.system_identifier().to_string(),
-            waveform,
-        },
-        viewpoint: None,
-    })
+    Ok(points.into_cloud(&header, quantization))
+}
+
+/// What the points read so far hold, column by column.
+struct Points {
+    positions: Vec<[f64; 3]>,
+    colors16: Vec<[u16; 3]>,
+    fields: Columns,
+    extra: extra_bytes::Columns,
+    waveform: bool,
+}
+
+impl Points {
+    fn new(header: &las::Header, described: Vec<extra_bytes::Field>) -> Points {
+        let has_nir = header.point_format().has_nir;
+        Points {
+            positions: Vec::new(),
+            colors16: Vec::new(),
+            fields: Columns::new(),
+            extra: extra_bytes::Columns::new(described, &record_fields(has_nir)),
+            waveform: false,
+        }
+    }
+
+    fn push(&mut self, p: &Point, record: &[u8], extended: bool) {
+        self.positions.push([p.x, p.y, p.z]);
+        if let Some(c) = p.color {
+            self.colors16.push([c.red, c.green, c.blue]);
+        }
+        self.fields.push(field_values(p, record, extended));
+        self.extra.push(&p.extra_bytes);
+        // Index 0 says the point has no waveform packet.
+        self.waveform |= p
+            .waveform
+            .is_some_and(|w| w.wave_packet_descriptor_index != 0);
+    }
+
+    fn into_cloud(self, header: &las::Header, quantization: Quantization) -> PointCloud {
+        let n = self.positions.len();
+        let has_color = header.point_format().has_color;
+        let colors = (has_color && self.colors16.len() == n).then(|| eight_bit(&self.colors16));
+        let mut attributes = self.fields.into_attributes();
+        let (more, extra_bytes) = self.extra.into_attributes();
+        attributes.extend(more);
+        PointCloud {
+            positions: self.positions,
+            colors,
+            attributes,
+            quantization: Some(quantization),
+            crs: crs_records(header),
+            extra_bytes,
+            las_source: LasSource {
+                standard_gps_time: header.gps_time_type().is_standard(),
+                file_source_id: header.file_source_id(),
+                system_identifier: header.system_identifier().to_string(),
+                waveform: self.waveform,
+            },
+            viewpoint: None,
+        }
+    }
 }
 
 /// The user ID of the VLRs that hold a LAS file's coordinate reference system.
@@ -711,6 +736,46 @@ fn record(
             })
         }),
         ..Default::default()
+    }
+}
+
+/// The record fields of `cloud` that a LAS record holds as whole numbers from 0 to a bound and
+/// whose values are not all such numbers, one warning each: they are written clipped and cut
+/// to whole numbers. PTS intensities run from −2048 to 2047, and a PLY's or a text file's often
+/// from 0 to 1, which would all become 0 or 1.
+pub(super) fn clipped(cloud: &PointCloud) -> Vec<String> {
+    let bounded = [
+        ("intensity", u16::MAX),
+        ("user_data", 255),
+        ("point_source_id", u16::MAX),
+    ];
+    // Without colour, NIR goes to extra bytes (`record_fields`).
+    let nir = cloud.colors.is_some().then_some((NIR, u16::MAX));
+    (bounded.into_iter().chain(nir))
+        .filter_map(|(name, max)| {
+            let values = &cloud.attribute(name)?.values;
+            let fits = |&v: &f64| (0.0..=f64::from(max)).contains(&v) && v.fract() == 0.0;
+            if values.iter().all(fits) {
+                return None;
+            }
+            let low = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let high = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            Some(format!(
+                "{name} is written as a whole number from 0 to {max} in LAS: its values, from {} \
+                 to {}, are clipped and cut to whole numbers (rescale it, or write PLY or PCD)",
+                shown(low),
+                shown(high)
+            ))
+        })
+        .collect()
+}
+
+/// `v` as it is where it is whole, else to three decimals.
+fn shown(v: f64) -> String {
+    if v.fract() == 0.0 {
+        format!("{v}")
+    } else {
+        format!("{v:.3}")
     }
 }
 

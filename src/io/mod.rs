@@ -365,8 +365,8 @@ pub(crate) fn attribute_names(cloud: &PointCloud, taken: impl Fn(&str) -> bool) 
 /// What `cloud` holds that a `format` file at `output` has no place for, one warning each: a LAS
 /// input's coordinate reference system (only LAS and LAZ store one) and full-waveform packets
 /// (none), a PCD input's viewpoint (only PCD), record fields whose values LAS cannot hold (an
-/// intensity from 0 to 1), and attributes in XYZ text, which holds coordinates and colours only (and PTS
-/// the intensity; completed points lose their `synthetic` flag there).
+/// intensity from 0 to 1), and attributes in XYZ text, which holds coordinates and colours only
+/// (and PTS the intensity; completed points lose their `synthetic` flag there).
 pub fn unwritten(cloud: &PointCloud, format: Format, output: &Path) -> Vec<String> {
     let mut lost = Vec::new();
     if !cloud.crs.is_empty() && !matches!(format, Format::Las | Format::Laz) {

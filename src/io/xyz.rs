@@ -1,8 +1,9 @@
 //! XYZ text: one point a line, its numbers separated by whitespace or commas, or by
 //! semicolons with decimal points or commas (as spreadsheets write CSV where the comma is the
-//! decimal mark); `#` comments are skipped. A header line before the points names the columns (`x y z r g b intensity`,
-//! CloudCompare's `//X,Y,Z,R,G,B,…`); without one, the columns are read by their count
-//! ([`Layout::by_count`]). A first line holding one count, as PTS files begin, is skipped.
+//! decimal mark); `#` comments are skipped. A header line before the points names the columns
+//! (`x y z r g b intensity`, CloudCompare's `//X,Y,Z,R,G,B,…`); without one, the columns are
+//! read by their count ([`Layout::by_count`]). A first line holding one count, as PTS files
+//! begin, is skipped.
 
 use super::{max_points, Problem};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind};
@@ -173,8 +174,8 @@ fn table(text: &str) -> Result<Table, Problem> {
 }
 
 /// A header line's names: separated by semicolons or else commas where it has any (names may
-/// hold spaces then, which become `_`), else by whitespace; without quotes or CloudCompare's leading `//`; a name
-/// that comes again gets a number.
+/// hold spaces then, which become `_`), else by whitespace; without quotes or CloudCompare's
+/// leading `//`; a name that comes again gets a number.
 fn names(line: &str) -> Vec<String> {
     let line = line.trim_start_matches('/');
     let tokens: Vec<&str> =

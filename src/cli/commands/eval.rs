@@ -561,7 +561,6 @@ fn check(args: &EvalArgs) -> anyhow::Result<(bool, bool)> {
     Ok((geometry, color))
 }
 
-/// CD and F-scores of `--pred`/`--gt` or of matched files in `--pred-dir`/`--gt-dir`.
 /// `--pred` and `--gt`, which name files: a folder is meant for `--pred-dir` / `--gt-dir`.
 fn one_pair(pred: &Path, gt: &Path) -> anyhow::Result<Pair> {
     for (path, flag) in [(pred, "--pred-dir"), (gt, "--gt-dir")] {
@@ -582,6 +581,7 @@ fn one_pair(pred: &Path, gt: &Path) -> anyhow::Result<Pair> {
     })
 }
 
+/// CD and F-scores of `--pred`/`--gt` or of matched files in `--pred-dir`/`--gt-dir`.
 fn eval_clouds(
     args: &EvalArgs,
     log: Log,

@@ -1,7 +1,7 @@
 //! Building blocks shared by the generator and the discriminator, and the probe that lets
 //! `mvpcc profile` time each kind of layer without a second copy of the forward pass.
 
-use super::Padding;
+use super::{cpu, Padding};
 use burn::module::{Module, Param, RunningState};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Initializer, InstanceNorm, InstanceNormConfig, PaddingConfig2d};
@@ -76,7 +76,8 @@ pub struct ConvNorm {
     reflect: usize,
     /// Zero padding, applied by the convolution.
     zeros: usize,
-    /// Wide enough to run as [`shifted_conv`] on the CPU (see [`Formulation`]).
+    /// Wide enough to run as [`shifted_conv`] on the CPU with gradients (without them every
+    /// stride-1 convolution does, see [`Formulation`]).
     shifted: bool,
     #[module(skip)]
     kind: LayerKind,
@@ -92,7 +93,8 @@ pub enum Formulation {
     /// Sliced on the CPU, plain on any other device.
     Auto,
     /// `reflect_pad` from slices, `shifted_conv` for wide stride-1 layers and `strided_conv`
-    /// for the encoder's stride-2 ones.
+    /// for the encoder's stride-2 ones; in a forward pass on the CPU without gradients, every
+    /// stride-1 convolution and instance norm runs the kernels of `model::cpu`.
     Sliced,
     /// Burn's `conv2d` and `PadMode::Reflect`.
     Plain,
@@ -191,7 +193,8 @@ impl ConvNorm {
             if sliced && self.halves(&x) {
                 return strided_conv(x, self.conv.weight.val(), bias());
             }
-            if !(self.shifted && sliced) {
+            let shifted = self.shifted || cpu::applies(&x);
+            if !(shifted && sliced && self.conv.stride == [1, 1]) {
                 return self.conv.forward(x);
             }
             let z = self.zeros;
@@ -203,7 +206,7 @@ impl ConvNorm {
             shifted_conv(x, self.conv.weight.val(), bias(), self.conv.dilation[0])
         });
         match &self.norm {
-            Some(norm) => probe.layer(LayerKind::InstanceNorm, || norm.forward(x)),
+            Some(norm) => probe.layer(LayerKind::InstanceNorm, || instance_norm(norm, x, sliced)),
             None => x,
         }
     }
@@ -217,6 +220,16 @@ impl ConvNorm {
             && self.zeros == 1
             && h % 2 == 0
             && w % 2 == 0
+    }
+}
+
+/// `norm`'s instance normalization, with [`cpu::instance_norm`] where it applies and the layers
+/// are `sliced`.
+fn instance_norm(norm: &InstanceNorm, x: Tensor<4>, sliced: bool) -> Tensor<4> {
+    if sliced && cpu::applies(&x) {
+        cpu::instance_norm(x, norm.epsilon)
+    } else {
+        norm.forward(x)
     }
 }
 
@@ -246,6 +259,9 @@ pub fn shifted_conv(
     bias: Option<Tensor<1>>,
     dilation: usize,
 ) -> Tensor<4> {
+    if cpu::applies(&x) {
+        return cpu::conv(x, weight, bias, dilation);
+    }
     let [n, c_in, hp, wp] = x.dims();
     let [c_out, _, k, _] = weight.dims();
     let span = (k - 1) * dilation;
@@ -325,7 +341,10 @@ impl UpNorm {
     /// `[n, c_in, h, w]` → `[n, c_out, 2h, 2w]`
     pub fn forward<P: Probe>(&self, x: Tensor<4>, probe: &mut P) -> Tensor<4> {
         let x = probe.layer(LayerKind::ConvTranspose, || self.conv.forward(x));
-        probe.layer(LayerKind::InstanceNorm, || self.norm.forward(x))
+        let sliced = Formulation::sliced_on(&x.device());
+        probe.layer(LayerKind::InstanceNorm, || {
+            instance_norm(&self.norm, x, sliced)
+        })
     }
 }
 
@@ -552,6 +571,50 @@ mod tests {
             assert_eq!(ours.dims(), [2, c_out, h / 2, w / 2]);
             let err = (ours - reference).abs().max().into_scalar::<f32>();
             assert!(err < 1e-4, "{c_in}→{c_out}: {err}");
+        }
+    }
+
+    /// On the CPU without autodiff the sliced layers run [`cpu`]'s kernels: the same values as
+    /// Burn's layers, through every kind of layer of the generator.
+    #[test]
+    fn the_cpu_inference_kernels_agree_with_burns_layers() {
+        let device = Device::flex();
+        let planes = 8;
+        let input = Tensor::<4>::random([2, 7, 16, 12], Distribution::Default, &device);
+        for padding in [Padding::Reflect, Padding::Zero] {
+            let spec = |channels, kernel, stride, pad, kind| ConvSpec {
+                channels,
+                kernel,
+                stride,
+                dilation: 1,
+                pad,
+                norm: true,
+                kind,
+            };
+            let head = ConvNorm::new(
+                spec([7, planes], 7, 1, 3, LayerKind::Conv7x7),
+                padding,
+                &device,
+            );
+            let down = ConvNorm::new(
+                spec([planes, 2 * planes], 4, 2, 1, LayerKind::ConvDown),
+                padding,
+                &device,
+            );
+            let block = ResBlock::new(2 * planes, padding, &device);
+            let up = UpNorm::new([2 * planes, planes], &device);
+            let run = |formulation: Formulation| {
+                formulation.set();
+                let y = head.forward(input.clone(), &mut NoProbe);
+                let y = block.forward(down.forward(y, &mut NoProbe), &mut NoProbe);
+                let y = up.forward(y, &mut NoProbe);
+                Formulation::Auto.set();
+                y
+            };
+            let (sliced, plain) = (run(Formulation::Sliced), run(Formulation::Plain));
+            assert_eq!(sliced.dims(), [2, planes, 16, 12]);
+            let err = (sliced - plain).abs().max().into_scalar::<f32>();
+            assert!(err < 1e-4, "{padding:?}: {err}");
         }
     }
 

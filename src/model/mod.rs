@@ -7,6 +7,7 @@
 //! model has it, and the input's occupancy mask; empty pixels are zero. It leaves as `channels`
 //! planes in [0, 1] plus an occupancy logit.
 
+mod cpu;
 pub mod device;
 mod discriminator;
 pub mod gan;

@@ -1,0 +1,318 @@
+//! Inference kernels on flex's own buffers, for forward passes on the CPU that record no
+//! gradient (`complete`, validation): a stride-1 convolution whose taps accumulate into one
+//! output buffer, and instance normalization in two passes. Written with Burn's tensor ops the
+//! same convolution leaves a full-size temporary and a sum behind every tap (49 of each for a
+//! 7×7 kernel), and instance norm takes five passes over its input; the forward of the
+//! built-in model is ~10 % faster this way (docs/speed.md, *Accumulating products*). Training
+//! keeps Burn's ops, whose gradients it needs; the results agree to rounding (tested).
+
+use burn::tensor::{Tensor, TensorData};
+use rayon::prelude::*;
+
+/// Whether the kernels of this module run `x`'s layer: a tensor on flex that records no
+/// gradient.
+pub(super) fn applies(x: &Tensor<4>) -> bool {
+    !x.is_autodiff() && crate::model::device::is_cpu(&x.device())
+}
+
+/// Input planes from which each tap's product reads the input in place; with fewer (the
+/// 7-plane input convolution) a product over 7 planes is too thin to run fast, so the shifted
+/// windows of one kernel row are copied beside each other and multiplied at once (measured on
+/// 2 cores, the 7×7 input convolution at 128²: 39 ms as one tap a product, 23 ms a row at once).
+const IN_PLACE_MIN_PLANES: usize = 32;
+
+/// Stride-1 convolution of an already padded input, the output computed on the padded width
+/// (so each tap's window of the flattened image is one strided matrix) and cropped.
+///
+/// # Shapes
+/// `x`: `[n, c_in, h + span, w + span]` with `span = (k − 1)·dilation`, `weight`:
+/// `[c_out, c_in, k, k]`, `bias`: `[c_out]` → `[n, c_out, h, w]`
+pub(super) fn conv(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    dilation: usize,
+) -> Tensor<4> {
+    let device = x.device();
+    let [n, c_in, hp, wp] = x.dims();
+    let [c_out, _, k, _] = weight.dims();
+    let span = (k - 1) * dilation;
+    let (h, w) = (hp - span, wp - span);
+    let taps_at_once = if c_in >= IN_PLACE_MIN_PLANES { 1 } else { k };
+    let shape = ConvShape {
+        c_in,
+        c_out,
+        k,
+        dilation,
+        padded: [hp, wp],
+        len: (h - 1) * wp + w,
+        taps_at_once,
+    };
+    let x = floats(x.into_data());
+    let weight = shape.grouped_weight(&floats(weight.into_data()));
+    let bias = bias.map_or_else(|| vec![0.0; c_out], |b| floats(b.into_data()));
+    let mut out = vec![0.0; n * c_out * h * w];
+    let mut wide = vec![0.0; c_out * h * wp];
+    let mut stack = vec![
+        0.0;
+        if taps_at_once > 1 {
+            c_in * k * shape.len
+        } else {
+            0
+        }
+    ];
+    for (image, out) in x
+        .chunks_exact(c_in * hp * wp)
+        .zip(out.chunks_exact_mut(c_out * h * w))
+    {
+        shape.run(image, &weight, &bias, &mut wide, &mut stack);
+        for (o, row) in out.chunks_exact_mut(w).enumerate() {
+            let (plane, y) = (o / h, o % h);
+            row.copy_from_slice(&wide[plane * h * wp + y * wp..][..w]);
+        }
+    }
+    Tensor::from_data(TensorData::new(out, [n, c_out, h, w]), &device)
+}
+
+/// One convolution's sizes, in the padded-width layout of [`conv`].
+struct ConvShape {
+    c_in: usize,
+    c_out: usize,
+    k: usize,
+    dilation: usize,
+    padded: [usize; 2],
+    /// Output pixels on the padded width whose window lies in the image: the last valid one
+    /// reads the last input pixel.
+    len: usize,
+    /// Consecutive taps (row-major over the kernel) multiplied in one product.
+    taps_at_once: usize,
+}
+
+impl ConvShape {
+    /// The weights as one `[c_out, c_in · taps_at_once]` matrix per group of taps, rows in the
+    /// order the group's windows are read (plane, then tap).
+    fn grouped_weight(&self, weight: &[f32]) -> Vec<f32> {
+        let (g, kk) = (self.taps_at_once, self.k * self.k);
+        let mut grouped = Vec::with_capacity(weight.len());
+        for group in 0..kk / g {
+            for taps in weight.chunks_exact(kk) {
+                grouped.extend_from_slice(&taps[group * g..][..g]);
+            }
+        }
+        grouped
+    }
+
+    /// Pixel offset of tap `t`'s window in the flattened padded image.
+    fn shift(&self, t: usize) -> usize {
+        ((t / self.k) * self.padded[1] + t % self.k) * self.dilation
+    }
+
+    /// One image: `wide` (`[c_out, h · wp]`) becomes the bias plus every tap's product.
+    fn run(
+        &self,
+        image: &[f32],
+        weight: &[f32],
+        bias: &[f32],
+        wide: &mut [f32],
+        stack: &mut [f32],
+    ) {
+        let plane = self.padded[0] * self.padded[1];
+        let out_plane = wide.len() / self.c_out;
+        for (row, &b) in wide.chunks_exact_mut(out_plane).zip(bias) {
+            row.fill(b);
+        }
+        let g = self.taps_at_once;
+        let rows = self.c_in * g;
+        let dst = Strided::rows(self.c_out, self.len, out_plane);
+        for (group, lhs) in weight.chunks_exact(self.c_out * rows).enumerate() {
+            let lhs_view = Strided::rows(self.c_out, rows, rows);
+            if g == 1 {
+                let rhs = Strided {
+                    start: self.shift(group),
+                    ..Strided::rows(self.c_in, self.len, plane)
+                };
+                multiply_add(wide, dst, lhs, lhs_view, image, rhs);
+                continue;
+            }
+            for (r, window) in stack.chunks_exact_mut(self.len).enumerate() {
+                let start = (r / g) * plane + self.shift(group * g + r % g);
+                window.copy_from_slice(&image[start..][..self.len]);
+            }
+            let rhs = Strided::rows(rows, self.len, self.len);
+            multiply_add(wide, dst, lhs, lhs_view, stack, rhs);
+        }
+    }
+}
+
+/// A matrix in a slice: element (r, c) at `start + r · row_stride + c` (columns contiguous).
+#[derive(Clone, Copy)]
+struct Strided {
+    start: usize,
+    rows: usize,
+    cols: usize,
+    row_stride: usize,
+}
+
+impl Strided {
+    fn rows(rows: usize, cols: usize, row_stride: usize) -> Strided {
+        Strided {
+            start: 0,
+            rows,
+            cols,
+            row_stride,
+        }
+    }
+
+    /// One past the last element, or `start` when empty.
+    fn end(&self) -> usize {
+        if self.rows == 0 || self.cols == 0 {
+            return self.start;
+        }
+        self.start + (self.rows - 1) * self.row_stride + self.cols
+    }
+}
+
+/// `dst += lhs · rhs` with gemm on rayon's pool.
+fn multiply_add(dst: &mut [f32], d: Strided, lhs: &[f32], l: Strided, rhs: &[f32], r: Strided) {
+    assert!(
+        d.rows == l.rows && d.cols == r.cols && l.cols == r.rows,
+        "product shapes"
+    );
+    assert!(
+        d.end() <= dst.len() && l.end() <= lhs.len() && r.end() <= rhs.len(),
+        "bounds"
+    );
+    // Rows of `dst` must not overlap, or two threads would write one element.
+    assert!(d.rows <= 1 || d.row_stride >= d.cols, "overlapping rows");
+    if d.rows == 0 || d.cols == 0 || l.cols == 0 {
+        return;
+    }
+    // SAFETY: the asserts above keep every element gemm reads or writes inside its slice, and
+    // the output's elements distinct; `dst` is borrowed mutably, so it overlaps no input.
+    unsafe {
+        gemm::gemm(
+            d.rows,
+            d.cols,
+            l.cols,
+            dst.as_mut_ptr().add(d.start),
+            1,
+            d.row_stride as isize,
+            true,
+            lhs.as_ptr().add(l.start),
+            1,
+            l.row_stride as isize,
+            rhs.as_ptr().add(r.start),
+            1,
+            r.row_stride as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::Rayon(0),
+        );
+    }
+}
+
+/// Instance normalization without affine parameters, as Burn's `InstanceNorm` (biased
+/// variance, `epsilon` inside the root), the statistics summed in f64.
+///
+/// # Shapes
+/// `[n, c, h, w]` → `[n, c, h, w]`
+pub(super) fn instance_norm(x: Tensor<4>, epsilon: f64) -> Tensor<4> {
+    let device = x.device();
+    let dims = x.dims();
+    let plane = dims[2] * dims[3];
+    let mut values = floats(x.into_data());
+    values
+        .par_chunks_mut(plane.max(1))
+        .with_min_len(4)
+        .for_each(|plane| {
+            let count = plane.len() as f64;
+            let mean = plane.iter().map(|&v| v as f64).sum::<f64>() / count;
+            let variance = plane
+                .iter()
+                .map(|&v| {
+                    let d = v as f64 - mean;
+                    d * d
+                })
+                .sum::<f64>()
+                / count;
+            let scale = (variance + epsilon).sqrt().recip() as f32;
+            let mean = mean as f32;
+            for v in plane {
+                *v = (*v - mean) * scale;
+            }
+        });
+    Tensor::from_data(TensorData::new(values, dims), &device)
+}
+
+fn floats(data: TensorData) -> Vec<f32> {
+    data.try_into_vec::<f32>()
+        .expect("the model's tensors hold f32 (its weights are loaded as f32)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::nn::InstanceNormConfig;
+    use burn::tensor::module::conv2d;
+    use burn::tensor::ops::{ConvOptions, PadMode};
+    use burn::tensor::{Device, Distribution};
+
+    fn largest_difference(a: Tensor<4>, b: Tensor<4>) -> f32 {
+        assert_eq!(a.dims(), b.dims());
+        (a - b).abs().max().into_scalar::<f32>()
+    }
+
+    #[test]
+    fn conv_matches_burns_convolution() {
+        let device = Device::flex();
+        // (batch, c_in, c_out, k, dilation, h, w): kernel rows stacked (c_in < 32), taps in
+        // place, a 1×1 kernel, a dilated one, and one output plane.
+        for (n, c_in, c_out, k, dilation, h, w) in [
+            (2, 3, 5, 3, 1, 6, 9),
+            (1, 7, 4, 7, 1, 10, 12),
+            (2, 33, 6, 3, 2, 7, 9),
+            (1, 40, 3, 1, 1, 5, 4),
+            (1, 32, 1, 4, 1, 3, 8),
+        ] {
+            let pad = (k - 1) * dilation;
+            let x = Tensor::<4>::random([n, c_in, h, w], Distribution::Default, &device);
+            let weight = Tensor::<4>::random([c_out, c_in, k, k], Distribution::Default, &device);
+            let bias = Tensor::<1>::random([c_out], Distribution::Default, &device);
+            let padded = x.pad([(0, pad), (pad, 0)], PadMode::Constant(0.0));
+            let options = ConvOptions::new([1, 1], [0, 0], [dilation, dilation], 1);
+            for bias in [Some(bias), None] {
+                let reference = conv2d(
+                    padded.clone(),
+                    weight.clone(),
+                    bias.clone(),
+                    options.clone(),
+                );
+                let ours = conv(padded.clone(), weight.clone(), bias, dilation);
+                let err = largest_difference(ours, reference);
+                assert!(
+                    err < 1e-4,
+                    "{c_in}→{c_out}, k {k}, dilation {dilation}: {err}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn instance_norm_matches_burns() {
+        let device = Device::flex();
+        let norm = InstanceNormConfig::new(3).with_affine(false).init(&device);
+        let x = Tensor::<4>::random([2, 3, 5, 7], Distribution::Normal(4.0, 3.0), &device);
+        let err = largest_difference(instance_norm(x.clone(), norm.epsilon), norm.forward(x));
+        assert!(err < 1e-5, "{err}");
+    }
+
+    #[test]
+    fn only_forward_passes_without_gradients_on_the_cpu_take_these_kernels() {
+        let x = Tensor::<4>::zeros([1, 1, 2, 2], &Device::flex());
+        assert!(applies(&x));
+        assert!(!applies(&x.autodiff()));
+    }
+}

@@ -214,6 +214,41 @@ fn multiply_add(dst: &mut [f32], d: Strided, lhs: &[f32], l: Strided, rhs: &[f32
     }
 }
 
+/// The input of a 4×4 stride-2 convolution with one pixel of zero padding, its padded 2×2
+/// pixel blocks stacked as planes: plane `c·4 + 2·dy + dx`, block `(by, bx)` holds pixel
+/// `(2·by + dy − 1, 2·bx + dx − 1)` of plane `c` (zero outside). One pass of plain copies, where
+/// Burn's pad, permute and copy to a contiguous layout take three, the permute's element by
+/// element.
+///
+/// # Shapes
+/// `[n, c, h, w]` (h, w even) → `[n, 4c, h/2 + 1, w/2 + 1]`
+pub(super) fn space_to_depth(x: Tensor<4>) -> Tensor<4> {
+    let device = x.device();
+    let [n, c, h, w] = x.dims();
+    let (hb, wb) = (h / 2 + 1, w / 2 + 1);
+    let x = floats(x.into_data());
+    let mut blocks = vec![0.0; n * c * 4 * hb * wb];
+    blocks
+        .par_chunks_mut(hb * wb)
+        .enumerate()
+        .for_each(|(plane, out)| {
+            let (source, dy, dx) = (plane / 4, plane % 4 / 2, plane % 2);
+            let source = &x[source * h * w..][..h * w];
+            for (by, row) in out.chunks_exact_mut(wb).enumerate() {
+                let Some(y) = (2 * by + dy).checked_sub(1).filter(|&y| y < h) else {
+                    continue;
+                };
+                let line = &source[y * w..][..w];
+                // Pixel 2·bx + dx − 1 of the line: with dx = 0 block 0 is padding.
+                let (first, from) = if dx == 0 { (1, 1) } else { (0, 0) };
+                for (v, &p) in row[first..].iter_mut().zip(line[from..].iter().step_by(2)) {
+                    *v = p;
+                }
+            }
+        });
+    Tensor::from_data(TensorData::new(blocks, [n, c * 4, hb, wb]), &device)
+}
+
 /// Instance normalization without affine parameters, as Burn's `InstanceNorm` (biased
 /// variance, `epsilon` inside the root), the statistics summed in f64.
 ///

@@ -303,12 +303,15 @@ pub fn strided_conv(x: Tensor<4>, weight: Tensor<4>, bias: Option<Tensor<1>>) ->
     let [n, c_in, h, w] = x.dims();
     let [c_out, ..] = weight.dims();
     let (hb, wb) = (h / 2 + 1, w / 2 + 1);
-    let blocks = x
-        .pad([(1, 1), (1, 1)], PadMode::Constant(0.0))
-        .reshape([n * c_in, hb, 2, wb, 2])
-        .permute([0, 2, 4, 1, 3])
-        .reshape([n, c_in * 4, hb, wb]); // plane c·4 + 2·dy + dx
-                                         // Tap (2a + dy, 2b + dx) of the 4×4 kernel is tap (a, b) of plane (c, dy, dx).
+    let blocks = if cpu::applies(&x) {
+        cpu::space_to_depth(x)
+    } else {
+        x.pad([(1, 1), (1, 1)], PadMode::Constant(0.0))
+            .reshape([n * c_in, hb, 2, wb, 2])
+            .permute([0, 2, 4, 1, 3])
+            .reshape([n, c_in * 4, hb, wb]) // plane c·4 + 2·dy + dx
+    };
+    // Tap (2a + dy, 2b + dx) of the 4×4 kernel is tap (a, b) of plane (c, dy, dx).
     let weight = weight
         .reshape([c_out * c_in, 2, 2, 2, 2]) // [c_out·c_in, a, dy, b, dx]
         .permute([0, 2, 4, 1, 3])

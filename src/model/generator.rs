@@ -13,25 +13,6 @@ use burn::tensor::{s, Device, Tensor};
 /// (sigmoid ≈ 1 − 2e-9).
 const MEASURED_LOGIT: f32 = 20.0;
 
-/// A normalized convolution's spec without dilation.
-fn spec(
-    channels: [usize; 2],
-    kernel: usize,
-    stride: usize,
-    pad: usize,
-    kind: LayerKind,
-) -> ConvSpec {
-    ConvSpec {
-        channels,
-        kernel,
-        stride,
-        dilation: 1,
-        pad,
-        norm: true,
-        kind,
-    }
-}
-
 #[derive(Module, Debug)]
 pub struct Generator {
     stem: ConvNorm,
@@ -73,7 +54,7 @@ impl Generator {
             [config.views * 4 * w, 4 * w]
         };
         let fusion = ConvNorm::new(
-            spec(fusion_channels, 3, 1, 1, LayerKind::Fusion),
+            ConvSpec::normalized(fusion_channels, 3, 1, 1, LayerKind::Fusion),
             Padding::Zero,
             device,
         );
@@ -104,14 +85,14 @@ impl Generator {
             planes
         };
         let stem = ConvNorm::new(
-            spec([stem_in, w], 7, 1, 3, LayerKind::Conv7x7),
+            ConvSpec::normalized([stem_in, w], 7, 1, 3, LayerKind::Conv7x7),
             padding,
             device,
         );
         let down = [[w, 2 * w], [2 * w, 4 * w]]
             .map(|channels| {
                 ConvNorm::new(
-                    spec(channels, 4, 2, 1, LayerKind::ConvDown),
+                    ConvSpec::normalized(channels, 4, 2, 1, LayerKind::ConvDown),
                     padding,
                     device,
                 )
@@ -141,7 +122,7 @@ impl Generator {
         let head = ConvNorm::new(
             ConvSpec {
                 norm: false,
-                ..spec([w, outputs], 7, 1, 3, LayerKind::Conv7x7)
+                ..ConvSpec::normalized([w, outputs], 7, 1, 3, LayerKind::Conv7x7)
             },
             config.padding,
             device,

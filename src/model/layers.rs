@@ -144,6 +144,27 @@ pub struct ConvSpec {
     pub kind: LayerKind,
 }
 
+impl ConvSpec {
+    /// A convolution without dilation, then instance norm.
+    pub fn normalized(
+        channels: [usize; 2],
+        kernel: usize,
+        stride: usize,
+        pad: usize,
+        kind: LayerKind,
+    ) -> ConvSpec {
+        ConvSpec {
+            channels,
+            kernel,
+            stride,
+            dilation: 1,
+            pad,
+            norm: true,
+            kind,
+        }
+    }
+}
+
 impl ConvNorm {
     /// `padding` applies to same-size convolutions; the stride-2 ones always zero-pad by one
     /// pixel, as the original.
@@ -585,15 +606,7 @@ mod tests {
         let planes = 8;
         let input = Tensor::<4>::random([2, 7, 16, 12], Distribution::Default, &device);
         for padding in [Padding::Reflect, Padding::Zero] {
-            let spec = |channels, kernel, stride, pad, kind| ConvSpec {
-                channels,
-                kernel,
-                stride,
-                dilation: 1,
-                pad,
-                norm: true,
-                kind,
-            };
+            let spec = ConvSpec::normalized;
             let head = ConvNorm::new(
                 spec([7, planes], 7, 1, 3, LayerKind::Conv7x7),
                 padding,
@@ -644,28 +657,12 @@ mod tests {
             let block = ResBlock::new(planes, padding, &device);
             assert!(block.dilated.shifted && block.plain.shifted);
             let head = ConvNorm::new(
-                ConvSpec {
-                    channels: [7, planes],
-                    kernel: 7,
-                    stride: 1,
-                    dilation: 1,
-                    pad: 3,
-                    norm: true,
-                    kind: LayerKind::Conv7x7,
-                },
+                ConvSpec::normalized([7, planes], 7, 1, 3, LayerKind::Conv7x7),
                 padding,
                 &device,
             );
             let down = ConvNorm::new(
-                ConvSpec {
-                    channels: [planes, planes],
-                    kernel: 4,
-                    stride: 2,
-                    dilation: 1,
-                    pad: 1,
-                    norm: true,
-                    kind: LayerKind::ConvDown,
-                },
+                ConvSpec::normalized([planes, planes], 4, 2, 1, LayerKind::ConvDown),
                 padding,
                 &device,
             );

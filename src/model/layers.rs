@@ -214,8 +214,9 @@ impl ConvNorm {
             if sliced && self.halves(&x) {
                 return strided_conv(x, self.conv.weight.val(), bias());
             }
-            let shifted = self.shifted || cpu::applies(&x);
-            if !(shifted && sliced && self.conv.stride == [1, 1]) {
+            let as_products =
+                sliced && self.conv.stride == [1, 1] && (self.shifted || cpu::applies(&x));
+            if !as_products {
                 return self.conv.forward(x);
             }
             let z = self.zeros;

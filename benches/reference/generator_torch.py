@@ -25,6 +25,8 @@ PRESETS = {
     "small": dict(width=32, res_blocks=4, size=128, padding="reflect"),
     "cpu": dict(width=56, res_blocks=6, size=128, padding="zero"),
     "tiny": dict(width=8, res_blocks=1, size=32, padding="reflect"),
+    # The built-in model's shape (`mvpcc profile` without --config).
+    "builtin": dict(width=48, res_blocks=2, size=128, padding="zero"),
 }
 DISC_WIDTH = {"tiny": 8}
 # mvpcc's LossWeights defaults (the original code's config.yml).

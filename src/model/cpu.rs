@@ -287,15 +287,8 @@ pub(super) fn instance_norm(x: Tensor<4>, epsilon: f64) -> Tensor<4> {
         .with_min_len(4)
         .for_each(|plane| {
             let count = plane.len() as f64;
-            let mean = plane.iter().map(|&v| v as f64).sum::<f64>() / count;
-            let variance = plane
-                .iter()
-                .map(|&v| {
-                    let d = v as f64 - mean;
-                    d * d
-                })
-                .sum::<f64>()
-                / count;
+            let mean = sum(plane, |v| v) / count;
+            let variance = sum(plane, |v| (v - mean) * (v - mean)) / count;
             let scale = (variance + epsilon).sqrt().recip() as f32;
             let mean = mean as f32;
             for v in plane {
@@ -303,6 +296,20 @@ pub(super) fn instance_norm(x: Tensor<4>, epsilon: f64) -> Tensor<4> {
             }
         });
     Tensor::from_data(TensorData::new(values, dims), &device)
+}
+
+/// The sum of `f` over `values` in f64, in eight running sums: one sum is a chain of dependent
+/// additions, which neither vectorizes nor overlaps.
+fn sum(values: &[f32], f: impl Fn(f64) -> f64) -> f64 {
+    let mut lanes = [0.0; 8];
+    let chunks = values.chunks_exact(8);
+    let rest: f64 = chunks.remainder().iter().map(|&v| f(f64::from(v))).sum();
+    for chunk in chunks {
+        for (lane, &v) in lanes.iter_mut().zip(chunk) {
+            *lane += f(f64::from(v));
+        }
+    }
+    lanes.iter().sum::<f64>() + rest
 }
 
 fn floats(data: TensorData) -> Vec<f32> {

@@ -412,7 +412,7 @@ fn scaled_sample(points: &[[f64; 3]], bounds: &Aabb, extent: f64) -> Option<Samp
 /// with it. `None` when the plane at `start` mirrors under `min_support` of the sample onto it.
 fn best_angle(
     sample: &Sample,
-    normal: impl Fn(f64) -> [f64; 3],
+    normal: impl Fn(f64) -> [f64; 3] + Sync,
     start: f64,
     max: f64,
     min_support: f64,
@@ -422,20 +422,28 @@ fn best_angle(
         return None;
     }
     // Turning about the box centre moves the plane's offset by the lever of the vehicle's
-    // middle, a few hundredths at most.
+    // middle, a few hundredths at most. The candidates are scored side by side (each score a
+    // sum over a sample too small for rayon to split) and the first best kept, as in turn.
     let search = |best: (f64, f64, f64), turns: &[f64], offsets: &[f64]| {
         let (a, c) = (best.0, best.1);
-        let mut best = best;
-        for &t in turns {
-            let n = normal(a + t);
-            for &o in offsets {
-                let score = sample.closeness(n, c + o);
+        let candidates: Vec<(f64, f64)> = turns
+            .iter()
+            .flat_map(|&t| offsets.iter().map(move |&o| (a + t, c + o)))
+            .collect();
+        let scores: Vec<f64> = candidates
+            .par_iter()
+            .map(|&(angle, offset)| sample.closeness(normal(angle), offset))
+            .collect();
+        candidates
+            .into_iter()
+            .zip(scores)
+            .fold(best, |best, ((angle, offset), score)| {
                 if score > best.2 {
-                    best = (a + t, c + o, score);
+                    (angle, offset, score)
+                } else {
+                    best
                 }
-            }
-        }
-        best
+            })
     };
     let start = (start, c0, sample.closeness(normal(start), c0));
     let coarse: Vec<f64> = (-8..=8).map(|i| i as f64 * max / 8.0).collect();
@@ -620,9 +628,10 @@ impl Sample {
                 (lo.min(s), hi.max(s))
             });
         let best_of = |candidates: Vec<f64>| {
+            let supports: Vec<f64> = candidates.par_iter().map(|&c| self.support(n, c)).collect();
             candidates
                 .into_iter()
-                .map(|c| (c, self.support(n, c)))
+                .zip(supports)
                 .fold((0.0, -1.0), |best, s| if s.1 > best.1 { s } else { best })
         };
         let coarse = 40;

@@ -334,8 +334,9 @@ mod tests {
     fn conv_matches_burns_convolution() {
         let device = Device::flex();
         // (batch, c_in, c_out, k, dilation, h, w): kernel rows stacked (c_in < 32), taps in
-        // place, a 1×1 kernel, one output plane, and Winograd's tiles (3×3, c_in ≥ 32) dilated,
-        // cut by the image's edge in both phases of a dilation and larger than the image.
+        // place, a 1×1 kernel, one output plane, and Winograd's tiles (3×3, c_in ≥ 32, as many
+        // tiles as output planes) dilated, cut by the image's edge in both phases of a dilation
+        // and larger than the image.
         for (n, c_in, c_out, k, dilation, h, w) in [
             (2, 3, 5, 3, 1, 6, 9),
             (1, 7, 4, 7, 1, 10, 12),

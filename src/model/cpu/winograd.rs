@@ -1,12 +1,12 @@
-//! Winograd's minimal filtering for the 3×3 convolutions of many planes (the residual blocks and
-//! the view fusion): each tile of m×m output pixels of a plane comes from an (m + 2)² input
+//! Winograd's minimal filtering for the 3×3 convolutions of many planes (the residual blocks;
+//! the view fusion where its tiles are many enough, [`pays`]): each tile of m×m output pixels of a plane comes from an (m + 2)² input
 //! patch through (m + 2)² products instead of 9m², the patches and kernels being turned into
 //! that product space and the results back by small fixed matrices (Lavin & Gray, *Fast
 //! Algorithms for Convolutional Neural Networks*, 2016). The products become (m + 2)² matrix
 //! products over the planes, one per point of the tile's transform, each a plain gemm; the
-//! transforms are sums of rows, run across all tiles at once so that they vectorize.
+//! transforms are sums of rows, run across a block of tiles at once so that they vectorize.
 
-use super::{multiply, Strided};
+use super::{multiply, Strided, IN_PLACE_MIN_PLANES};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -90,12 +90,9 @@ impl Tiles {
 /// 128 tiles 781–794 / 574–641 / 527–538 ms; 64 no better than 128).
 const BLOCK: usize = 128;
 
-/// Input planes from which Winograd's tiles are taken; with fewer the products are thin, and
-/// such layers cost little either way (only the `tiny` config's and tests').
-const MIN_PLANES: usize = 32;
-
-/// Whether a 3×3 convolution of `n` images of `h × w` pixels runs faster as tiles: over many
-/// planes, and with at least as many tiles as output planes. With fewer, as in the fusion of
+/// Whether a 3×3 convolution of `n` images of `h × w` pixels runs faster as tiles: over as many
+/// planes as a product needs to run fast (`IN_PLACE_MIN_PLANES`; the direct products stack a
+/// kernel row's taps below it), and with at least as many tiles as output planes. With fewer, as in the fusion of
 /// one object's views (64 tiles, 768 → 192 planes), the kernels' transform, four times their
 /// size, outweighs the products it saves: `complete` of CAR175 peaked at 174 MB with the fusion
 /// as tiles against 135–156 MB without, in the same time (0.37–0.38 s, 4 runs each, paired).
@@ -105,7 +102,7 @@ pub(super) fn pays(
     [h, w]: [usize; 2],
     dilation: usize,
 ) -> bool {
-    c_in >= MIN_PLANES && n * Tiles::new(F4.m, dilation, [h, w]).per_image() >= c_out
+    c_in >= IN_PLACE_MIN_PLANES && n * Tiles::new(F4.m, dilation, [h, w]).per_image() >= c_out
 }
 
 /// 3×3 stride-1 convolution of an already padded input, dilated by `dilation`.

@@ -6,6 +6,7 @@
 //! Points close to a candidate plane map onto themselves whatever the candidate, so they are not
 //! counted; otherwise a flat side would always be "symmetric" about itself.
 
+use crate::complete::orient::{at_height, GROUND};
 use crate::core::cloud::Aabb;
 use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -66,12 +67,14 @@ pub enum PlaneFit {
     /// Held back at the middle of the slice seen widest on both sides: the pairs put it
     /// beyond, towards the better scanned side.
     HeldBack,
+    /// Half-way between the near and the far tyres (see [`find_plane`]).
+    Tyres,
     /// Half the vehicle's given width from the scanned flank: the plane found lay nearer it,
     /// or none was found (see [`find_plane`]).
     Width,
 }
 
-/// Finds `x = c` in three steps:
+/// Finds `x = c` in four steps:
 ///
 /// 1. **Support**: `c` across the cloud's x range, coarse to fine, where the most mirror images
 ///    land on measured points.
@@ -87,11 +90,16 @@ pub enum PlaneFit {
 ///    there, so a plane beyond the middle of a horizontal slice's width, towards that side,
 ///    would put the mirror images of the far side's points outside it, where they would have
 ///    been scanned: the plane is held back at the tightest such middle (`slices_middle`).
+/// 4. **Tyres**: on a one-sided cloud whose lowest points show the near and the far tyres, a
+///    plane short of the gap between them, towards the scanned side, moves to its middle
+///    (`between_the_tracks`). Only outward: seen from above, the near tyres show their side
+///    walls and not their treads' inner edges, and the gap's middle then lies towards the
+///    scanned side of the plane, where the slices already bound it.
 ///
 /// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
 /// to 0.699, most of it on the 27 % of partials that had no plane before. Given the vehicle's
 /// `width` (normalized units), a scan of one side has its plane kept at least half of it from
-/// the scanned flank (`with_width`). `None` only when neither support nor pairs show any
+/// the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show any
 /// symmetry (for example, one flat side) and no width places a plane.
 pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
@@ -122,6 +130,17 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         };
         sample.plane(offset, fit)
     });
+    let tyres = seen
+        .one_sided
+        .then(|| between_the_tracks(points, &bounds))
+        .flatten();
+    let found = match (found, tyres) {
+        (Some(p), Some(t)) if (t - p.offset) * seen.side < 0.0 => {
+            Some(sample.plane(t, PlaneFit::Tyres))
+        }
+        (None, Some(t)) => Some(sample.plane(t, PlaneFit::Tyres)),
+        (found, _) => found,
+    };
     match width {
         Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
@@ -265,6 +284,35 @@ impl Seen {
             slices,
         }
     }
+}
+
+/// Points a tyre track needs in [`between_the_tracks`].
+const TRACK_POINTS: usize = 10;
+/// The gap between the two tracks spans at least this share of the cloud's width.
+const TRACK_GAP: f64 = 0.5;
+
+/// The middle of the gap between the near and the far tyres, where the ground points (the
+/// lowest [`GROUND`] of the height) fall into two tracks across the width. Seen from beside the
+/// vehicle at its height, the near tyres show their treads edge to edge and the far ones their
+/// inner faces under the body, so the gap's two sides are mirror twins, while nothing else of
+/// the far side may be in view (camera partials: docs/completing.md). `bounds` is the points'
+/// box.
+fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb) -> Option<f64> {
+    let ground = at_height(points, GROUND);
+    let mut low: Vec<f64> = points
+        .iter()
+        .filter(|p| p[1] <= ground)
+        .map(|p| p[0])
+        .collect();
+    low.sort_by(f64::total_cmp);
+    let (gap, at) = low
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| (w[1] - w[0], i + 1))
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    let tracks = at >= TRACK_POINTS && low.len() - at >= TRACK_POINTS;
+    let apart = gap >= TRACK_GAP * (bounds.max[0] - bounds.min[0]);
+    (tracks && apart).then(|| (low[at - 1] + low[at]) / 2.0)
 }
 
 /// [`with_width`] trusts the scanned flank to be seen at its widest only where it lies at least
@@ -771,6 +819,54 @@ mod tests {
             -0.01,
             "short of it: kept"
         );
+    }
+
+    /// A side view from the vehicle's height, as cameras beside it see one (x = 0 its plane):
+    /// the near flank at x = 0.2, the back seen in part (to x = -0.12), the near tyres' treads
+    /// edge to edge (x 0.15 to 0.2) and, with `far_tyre`, the far back tyre's inner face at
+    /// x = -0.15 under the body.
+    fn side_view(far_tyre: bool) -> Vec<[f64; 3]> {
+        let steps = |from: f64, to: f64, step: f64| {
+            let n = ((to - from) / step).round() as usize;
+            (0..=n).map(move |i| from + i as f64 * step)
+        };
+        let mut points: Vec<[f64; 3]> = steps(0.05, 0.3, 0.002)
+            .flat_map(|y| steps(0.0, 0.49, 0.01).map(move |z| [0.2, y, z]))
+            .collect();
+        points.extend(
+            steps(-0.12, 0.2, 0.01).flat_map(|x| steps(0.05, 0.3, 0.01).map(move |y| [x, y, 0.5])),
+        );
+        let tyre = |xs: (f64, f64), z0: f64| {
+            steps(xs.0, xs.1, 0.005).flat_map(move |x| {
+                steps(0.0, 0.014, 0.002)
+                    .flat_map(move |y| steps(z0, z0 + 0.07, 0.01).map(move |z| [x, y, z]))
+            })
+        };
+        points.extend(tyre((0.15, 0.2), 0.05).chain(tyre((0.15, 0.2), 0.37)));
+        if far_tyre {
+            points.extend(tyre((-0.15, -0.15), 0.37));
+        }
+        points
+    }
+
+    #[test]
+    fn a_side_view_s_plane_lies_between_the_tyres() {
+        // The back's slice pairs the near flank with the back's far extreme, short of the far
+        // edge, so the slices hold the plane about 0.035 towards the camera; the gap between
+        // the near treads' inner edge and the far tyre's inner face is centred on the plane.
+        let points = side_view(true);
+        let bounds = Aabb::of(&points).unwrap();
+        assert!((between_the_tracks(&points, &bounds).unwrap()).abs() < 1e-9);
+        let plane = find_plane(&points, None).expect("the back and the tyres pair");
+        assert_eq!(plane.fit, PlaneFit::Tyres);
+        assert!(plane.offset.abs() < 1e-9, "plane at {}", plane.offset);
+        // Without the far tyre the ground points are one track, and the slices bound it.
+        let points = side_view(false);
+        let bounds = Aabb::of(&points).unwrap();
+        assert_eq!(between_the_tracks(&points, &bounds), None);
+        let plane = find_plane(&points, None).expect("the back pairs");
+        assert_eq!(plane.fit, PlaneFit::HeldBack);
+        assert!(plane.offset > 0.03, "plane at {}", plane.offset);
     }
 
     /// [`with_width`] with the box and the sample [`find_plane`] gives it.

@@ -481,7 +481,7 @@ fn extents(points: &[[f64; 3]], heading: f64) -> (f64, (f64, f64)) {
 
 /// Points below this share of the height are where the wheels meet the ground. Chosen on the
 /// validation split among 0.03, 0.05 and 0.1 (docs/orientation.md).
-const GROUND: f64 = 0.05;
+pub(crate) const GROUND: f64 = 0.05;
 /// The ground points must span at least this share of the footprint's length along their line,
 /// so that both ends' wheels are in it.
 const WHEELBASE: f64 = 0.5;
@@ -562,7 +562,7 @@ fn span_along<'a>(points: impl Iterator<Item = &'a [f64; 3]>, heading: f64) -> f
 }
 
 /// The height `share` of the way from the lowest of `points` (upright) to the highest.
-fn at_height(points: &[[f64; 3]], share: f64) -> f64 {
+pub(crate) fn at_height(points: &[[f64; 3]], share: f64) -> f64 {
     let (lo, hi) = points.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
         (lo.min(p[1]), hi.max(p[1]))
     });

@@ -92,9 +92,10 @@ pub enum PlaneFit {
 ///    been scanned: the plane is held back at the tightest such middle (`slices_middle`).
 /// 4. **Tyres**: on a one-sided cloud whose lowest points show the near and the far tyres, a
 ///    plane short of the gap between them, towards the scanned side, moves to its middle
-///    (`between_the_tracks`). Only outward: seen from above, the near tyres show their side
-///    walls and not their treads' inner edges, and the gap's middle then lies towards the
-///    scanned side of the plane, where the slices already bound it.
+///    (`between_the_tyres`). Inward only from a plane the pairs alone placed, and only where
+///    the near treads are seen across: seen from above, the near tyres show their side walls
+///    and not their treads' inner edges, and the gap's middle then leans towards the scanned
+///    side.
 ///
 /// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
 /// to 0.699, most of it on the 27 % of partials that had no plane before. Given the vehicle's
@@ -130,20 +131,44 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         };
         sample.plane(offset, fit)
     });
-    let tyres = seen
-        .one_sided
-        .then(|| between_the_tracks(points, &bounds))
-        .flatten();
-    let found = match (found, tyres) {
-        (Some(p), Some(t)) if (t - p.offset) * seen.side < 0.0 => {
-            Some(sample.plane(t, PlaneFit::Tyres))
-        }
-        (None, Some(t)) => Some(sample.plane(t, PlaneFit::Tyres)),
-        (found, _) => found,
-    };
+    let found = between_the_tyres(points, &bounds, &seen, &sample, found);
     match width {
         Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
+    }
+}
+
+/// Step 4 of [`find_plane`]: the plane `found` on a one-sided cloud moved to the middle between
+/// the tyre tracks (see [`between_the_tracks`]) where it lies short of it, towards the scanned
+/// side, or where the pairs alone placed it and the near treads are seen edge to edge (then
+/// still held back by the slices, [`held_back`]). `bounds` is the points' box, `seen` how they
+/// were seen in it, `sample` [`find_plane`]'s.
+fn between_the_tyres(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    seen: &Seen,
+    sample: &Sample,
+    found: Option<Plane>,
+) -> Option<Plane> {
+    let tracks = seen
+        .one_sided
+        .then(|| between_the_tracks(points, bounds, seen.side))
+        .flatten();
+    match (found, tracks) {
+        (Some(p), Some(t)) if (t.middle - p.offset) * seen.side < 0.0 => {
+            Some(sample.plane(t.middle, PlaneFit::Tyres))
+        }
+        (Some(p), Some(t)) if p.fit == PlaneFit::Pairs && t.near_width >= TREADS_SEEN => {
+            let offset = held_back(points, bounds, seen, t.middle);
+            let fit = if offset == t.middle {
+                PlaneFit::Tyres
+            } else {
+                PlaneFit::HeldBack
+            };
+            Some(sample.plane(offset, fit))
+        }
+        (None, Some(t)) => Some(sample.plane(t.middle, PlaneFit::Tyres)),
+        (found, _) => found,
     }
 }
 
@@ -300,13 +325,30 @@ const TRACK_GAP: f64 = 0.5;
 /// docs/completing.md).
 const TRACK_APART: f64 = 0.08;
 
+/// A near track at least this wide across (share of the length) shows its tyres' treads edge
+/// to edge, as a camera beside the vehicle at its height sees them, and then the gap's middle
+/// also overrules a plane the pairs alone placed beyond it, away from the scanned side; from
+/// above, a scanner sees the near tyres' side walls and not their treads' inner edges. Chosen
+/// on the validation splits among 0.01, 0.015, 0.02, 0.025 and 0.03 (docs/completing.md).
+const TREADS_SEEN: f64 = 0.02;
+
+/// Two tyre tracks in a cloud's ground points (see [`between_the_tracks`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Tracks {
+    /// The middle of the gap between them.
+    middle: f64,
+    /// How wide across the track on the scanned side is.
+    near_width: f64,
+}
+
 /// The middle of the gap between the near and the far tyres, where the ground points (the
 /// lowest [`GROUND`] of the height) fall into two tracks across the width. Seen from beside the
 /// vehicle at its height, the near tyres show their treads edge to edge and the far ones their
 /// inner faces under the body, so the gap's two sides are mirror twins, while nothing else of
 /// the far side may be in view (camera partials: docs/completing.md). `bounds` is the points'
-/// box, `points` in [`find_plane`]'s frame (unit length).
-fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb) -> Option<f64> {
+/// box, `points` in [`find_plane`]'s frame (unit length), `scanned_side` (±1) the side the near
+/// track is on.
+fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<Tracks> {
     let ground = at_height(points, GROUND);
     let mut low: Vec<f64> = points
         .iter()
@@ -321,7 +363,15 @@ fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb) -> Option<f64> {
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
     let tracks = at >= TRACK_POINTS && low.len() - at >= TRACK_POINTS;
     let apart = gap >= TRACK_GAP * (bounds.max[0] - bounds.min[0]) && gap >= TRACK_APART;
-    (tracks && apart).then(|| (low[at - 1] + low[at]) / 2.0)
+    let near_width = if scanned_side > 0.0 {
+        low[low.len() - 1] - low[at]
+    } else {
+        low[at - 1] - low[0]
+    };
+    (tracks && apart).then(|| Tracks {
+        middle: (low[at - 1] + low[at]) / 2.0,
+        near_width,
+    })
 }
 
 /// [`with_width`] trusts the scanned flank to be seen at its widest only where it lies at least
@@ -865,26 +915,57 @@ mod tests {
         // the near treads' inner edge and the far tyre's inner face is centred on the plane.
         let points = side_view(true);
         let bounds = Aabb::of(&points).unwrap();
-        assert!((between_the_tracks(&points, &bounds).unwrap()).abs() < 1e-9);
+        let tracks = between_the_tracks(&points, &bounds, 1.0).unwrap();
+        assert!(tracks.middle.abs() < 1e-9, "{tracks:?}");
+        assert!(
+            (tracks.near_width - 0.05).abs() < 1e-9,
+            "the treads: {tracks:?}"
+        );
         let plane = find_plane(&points, None).expect("the back and the tyres pair");
         assert_eq!(plane.fit, PlaneFit::Tyres);
         assert!(plane.offset.abs() < 1e-9, "plane at {}", plane.offset);
         // Without the far tyre the ground points are one track, and the slices bound it.
         let points = side_view(false);
         let bounds = Aabb::of(&points).unwrap();
-        assert_eq!(between_the_tracks(&points, &bounds), None);
+        assert_eq!(between_the_tracks(&points, &bounds, 1.0), None);
         // Squeezed to a rail vehicle's width the tracks lie too near each other to be tyres'.
         let narrow: Vec<[f64; 3]> = side_view(true)
             .iter()
             .map(|p| [p[0] * 0.2, p[1], p[2]])
             .collect();
         assert_eq!(
-            between_the_tracks(&narrow, &Aabb::of(&narrow).unwrap()),
+            between_the_tracks(&narrow, &Aabb::of(&narrow).unwrap(), 1.0),
             None
         );
         let plane = find_plane(&points, None).expect("the back pairs");
         assert_eq!(plane.fit, PlaneFit::HeldBack);
         assert!(plane.offset > 0.03, "plane at {}", plane.offset);
+    }
+
+    #[test]
+    fn the_treads_seen_edge_to_edge_overrule_the_pairs_alone() {
+        // A plane the pairs alone placed 0.02 beyond the tyres' middle, away from the scanned
+        // side, moves to it where the near treads are seen across (0.05 wide); where only the
+        // near tyres' side walls are (a track as thin as a scanner from above sees), it stays.
+        let plane = |points: &[[f64; 3]], fit| {
+            let bounds = Aabb::of(points).unwrap();
+            let sample = Sample::of(points, SAMPLE, MIN_LEVER).unwrap();
+            let seen = Seen::of(points, &bounds);
+            let found = Some(sample.plane(-0.02, fit));
+            between_the_tyres(points, &bounds, &seen, &sample, found).unwrap()
+        };
+        let treads = side_view(true);
+        let moved = plane(&treads, PlaneFit::Pairs);
+        assert_eq!(
+            (moved.fit, moved.offset.abs() < 1e-9),
+            (PlaneFit::Tyres, true)
+        );
+        assert_eq!(plane(&treads, PlaneFit::Refined).offset, -0.02);
+        let walls: Vec<[f64; 3]> = treads
+            .into_iter()
+            .filter(|p| p[1] > 0.02 || p[0] < 0.0 || p[0] > 0.19)
+            .collect();
+        assert_eq!(plane(&walls, PlaneFit::Pairs).offset, -0.02);
     }
 
     /// [`with_width`] with the box and the sample [`find_plane`] gives it.

@@ -92,7 +92,7 @@ pub enum PlaneFit {
 ///    been scanned: the plane is held back at the tightest such middle (`slices_middle`).
 /// 4. **Tyres**: on a one-sided cloud whose lowest points show the near and the far tyres, a
 ///    plane short of the gap between them, towards the scanned side, moves to its middle
-///    (`between_the_tyres`). Inward only from a plane the pairs alone placed, and only where
+///    (`to_the_tyres`). Inward only from a plane the pairs alone placed, and only where
 ///    the near treads are seen across: seen from above, the near tyres show their side walls
 ///    and not their treads' inner edges, and the gap's middle then leans towards the scanned
 ///    side.
@@ -131,7 +131,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         };
         sample.plane(offset, fit)
     });
-    let found = between_the_tyres(points, &bounds, &seen, &sample, found);
+    let found = to_the_tyres(points, &bounds, &seen, &sample, found);
     match width {
         Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
@@ -143,7 +143,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
 /// side, or where the pairs alone placed it and the near treads are seen edge to edge (then
 /// still held back by the slices, [`held_back`]). `bounds` is the points' box, `seen` how they
 /// were seen in it, `sample` [`find_plane`]'s.
-fn between_the_tyres(
+fn to_the_tyres(
     points: &[[f64; 3]],
     bounds: &Aabb,
     seen: &Seen,
@@ -952,7 +952,7 @@ mod tests {
             let sample = Sample::of(points, SAMPLE, MIN_LEVER).unwrap();
             let seen = Seen::of(points, &bounds);
             let found = Some(sample.plane(-0.02, fit));
-            between_the_tyres(points, &bounds, &seen, &sample, found).unwrap()
+            to_the_tyres(points, &bounds, &seen, &sample, found).unwrap()
         };
         let treads = side_view(true);
         let moved = plane(&treads, PlaneFit::Pairs);

@@ -250,7 +250,7 @@ fn send(child: &std::process::Child, signal: &str) {
 #[cfg(unix)]
 #[test]
 fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
-    use std::io::Write as _;
+    use std::io::{Read as _, Write as _};
     use std::os::unix::process::ExitStatusExt as _;
     use std::process::Stdio;
     let dir = TempDir::new().unwrap();
@@ -281,10 +281,19 @@ fn a_command_stopped_by_a_signal_leaves_no_temporary_files() {
         }
         wait_for_entry(tmp.path());
         send(&child, signal);
-        let done = child.wait_with_output().unwrap();
+        // Waited for with its output unread: reading it would let the command finish on its
+        // own, racing the signal's handler.
+        let status = child.wait().unwrap();
         drop(stdin);
-        let case = format!("{signal}, reads stdin: {reads_stdin}");
-        assert_eq!(done.status.signal(), Some(number), "{case}");
+        let mut stderr = String::new();
+        child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut stderr)
+            .unwrap();
+        let case = format!("{signal}, reads stdin: {reads_stdin}, {status}: {stderr}");
+        assert_eq!(status.signal(), Some(number), "{case}");
         let left: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
         assert!(left.is_empty(), "{case}: {left:?}");
         assert!(!output.exists(), "{case}");

@@ -42,8 +42,7 @@ fn on_signal(signal: i32) {
         .get()
         .is_some_and(|flag| !flag.swap(true, Ordering::SeqCst));
     if !requested {
-        mvpcc::io::remove_unfinished();
-        stop(signal);
+        mvpcc::io::remove_unfinished_then(|| stop(signal));
     }
 }
 

@@ -1,7 +1,8 @@
 //! Point cloud files: PLY, PCD, LAS/LAZ and XYZ text, all read into and written from one
 //! [`PointCloud`]. Writes are atomic: a temporary file beside the output, renamed over it (a
 //! device or pipe is written into instead). `-` is standard input or output ([`stdio`]). A
-//! command stopped by Ctrl-C deletes the temporary files it was writing ([`remove_unfinished`]).
+//! command stopped by Ctrl-C deletes the temporary files it was writing
+//! ([`remove_unfinished_then`]).
 
 pub mod batch;
 mod las;
@@ -16,9 +17,11 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use stdio::{is_stdio, is_stream, spooled, write_stdout, write_whole_into};
+use tempfile::NamedTempFile;
 use thiserror::Error;
-pub use unfinished::remove_unfinished;
-pub(crate) use unfinished::{track, Tracked};
+pub use unfinished::remove_unfinished_then;
+pub(crate) use unfinished::track;
+use unfinished::Scratch;
 
 /// Point cloud file formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -506,7 +509,7 @@ where
     };
     let tmp = temp_file_beside(&file)?;
     {
-        let mut w = BufWriter::with_capacity(1 << 20, tmp.file.as_file());
+        let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file());
         body(&mut w)?;
         w.flush()?;
     }
@@ -515,14 +518,11 @@ where
 
 /// Renames a finished temporary file over `file`, which keeps the permissions it had (a new
 /// file gets those of an ordinary new file).
-fn persist(tmp: Beside, file: &Path) -> std::io::Result<()> {
-    let Beside { file: tmp, tracked } = tmp;
+fn persist(tmp: Scratch<NamedTempFile>, file: &Path) -> std::io::Result<()> {
     if let Ok(meta) = std::fs::metadata(file) {
         tmp.as_file().set_permissions(meta.permissions())?;
     }
-    let persisted = tmp.persist(file).map(drop).map_err(|e| e.error);
-    drop(tracked);
-    persisted
+    tmp.keep(|tmp| tmp.persist(file).map(drop).map_err(|e| e.error))
 }
 
 /// LAS/LAZ, whose writer seeks back to its header: into a device, pipe or socket it is written
@@ -547,15 +547,10 @@ fn reader_left(e: &std::io::Error) -> bool {
     e.kind() == std::io::ErrorKind::BrokenPipe
 }
 
-/// An output's temporary file, deleted if the process is stopped before it is renamed.
-struct Beside {
-    file: tempfile::NamedTempFile,
-    tracked: Tracked,
-}
-
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),
-/// created with the permissions of an ordinary new file rather than tempfile's private 0600.
-fn temp_file_beside(path: &Path) -> std::io::Result<Beside> {
+/// created with the permissions of an ordinary new file rather than tempfile's private 0600,
+/// and deleted if the process is stopped before it is renamed.
+fn temp_file_beside(path: &Path) -> std::io::Result<Scratch<NamedTempFile>> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -567,9 +562,7 @@ fn temp_file_beside(path: &Path) -> std::io::Result<Beside> {
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let file = builder.tempfile_in(dir)?;
-    let tracked = track(file.path());
-    Ok(Beside { file, tracked })
+    Ok(Scratch::new(builder.tempfile_in(dir)?))
 }
 
 /// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.

@@ -7,7 +7,7 @@
 //! whole to a temporary file first and then copied out, so a write that fails sends nothing
 //! rather than half a file.
 
-use super::unfinished::{track, Tracked};
+use super::unfinished::Scratch;
 use super::{write_cloud, CloudIoError, Encoding, Format, Problem};
 use crate::core::cloud::PointCloud;
 use std::fs::File;
@@ -35,9 +35,8 @@ pub(super) fn is_stream(path: &Path) -> bool {
 /// A stream's copy, once made.
 struct Spooled {
     source: PathBuf,
-    copy: TempPath,
+    copy: Scratch<TempPath>,
     format: Format,
-    _tracked: Tracked,
 }
 
 static SPOOLED: Mutex<Vec<Spooled>> = Mutex::new(Vec::new());
@@ -49,24 +48,22 @@ pub(super) fn spooled(path: &Path) -> Result<(PathBuf, Format), Problem> {
     if let Some(s) = spools.iter().find(|s| s.source == path) {
         return Ok((s.copy.to_path_buf(), s.format));
     }
-    let mut file = NamedTempFile::new()?;
-    let tracked = track(file.path());
+    let mut file = Scratch::new(NamedTempFile::new()?);
     if is_stdio(path) {
-        std::io::copy(&mut std::io::stdin().lock(), &mut file)?;
+        std::io::copy(&mut std::io::stdin().lock(), &mut *file)?;
     } else {
-        std::io::copy(&mut File::open(path)?, &mut file)?;
+        std::io::copy(&mut File::open(path)?, &mut *file)?;
     }
     file.flush()?;
     let mut head = Vec::new();
     File::open(file.path())?.take(HEAD).read_to_end(&mut head)?;
     let format = Format::sniff(&head);
-    let copy = file.into_temp_path();
+    let copy = file.map(NamedTempFile::into_temp_path);
     let found = (copy.to_path_buf(), format);
     spools.push(Spooled {
         source: path.to_path_buf(),
         copy,
         format,
-        _tracked: tracked,
     });
     Ok(found)
 }
@@ -102,8 +99,7 @@ pub(super) fn write_whole_into(
     format: Format,
     encoding: Encoding,
 ) -> Result<(), Problem> {
-    let dir = tempfile::tempdir()?;
-    let _tracked = track(dir.path());
+    let dir = Scratch::new(tempfile::tempdir()?);
     let whole = dir.path().join("cloud");
     write_cloud(&whole, cloud, Some(format), encoding).map_err(|e| e.problem)?;
     std::io::copy(&mut File::open(&whole)?, out)?;

@@ -789,7 +789,7 @@ pub(super) fn write(path: &Path, cloud: &PointCloud, compressed: bool) -> Result
     let columns = FIELDS.map(|(name, _)| cloud.attribute(name));
     let tmp = super::temp_file_beside(path).map_err(super::write_problem)?;
     {
-        let file = tmp.file.reopen()?;
+        let file = tmp.reopen()?;
         let mut writer = Writer::new(BufWriter::new(file), header).map_err(las_problem)?;
         for i in 0..cloud.len() {
             let point = Point {

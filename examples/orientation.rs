@@ -28,6 +28,9 @@ use std::path::{Path, PathBuf};
 
 type Error = Box<dyn std::error::Error>;
 
+/// A car's length in metres, for the clutter's sizes around the unit-length real scans.
+const CAR_LENGTH: f64 = 4.5;
+
 const MODES: [(&str, OrientMode); 3] = [
     ("geometric", OrientMode::Geometric),
     ("learned", OrientMode::Learned),
@@ -61,30 +64,33 @@ fn turned(cloud: &PointCloud, turn: f64, pivot: [f64; 3]) -> PointCloud {
 /// What a segmentation leaves around a y-up scan of `n` points: a ground patch under it
 /// reaching 0.6 m past its footprint (0.3·n points, ±1 cm), 15 noise points up to 2 m around
 /// it, and a 1 × 1.5 m piece of a neighbouring vehicle's side 0.4 m past its +x end (0.05·n
-/// points), uniformly random. Returns the counts added.
+/// points), uniformly random. Returns the counts added. The scans are of cars normalized to
+/// about unit length, so a metre is taken as [`CAR_LENGTH`]'s share of the scan's longest side.
 fn clutter(cloud: &PointCloud, rng: &mut Lcg) -> (PointCloud, [usize; 3]) {
     let b = cloud.bounds().expect("a scan has points");
+    let metre = b.longest_side() / CAR_LENGTH;
     let n = cloud.len();
     let mut positions = cloud.positions.clone();
     let ground = 3 * n / 10;
     for _ in 0..ground {
         positions.push([
-            rng.range(b.min[0] - 0.6, b.max[0] + 0.6),
-            b.min[1] - 0.02 + 0.01 * rng.gauss(),
-            rng.range(b.min[2] - 0.6, b.max[2] + 0.6),
+            rng.range(b.min[0] - 0.6 * metre, b.max[0] + 0.6 * metre),
+            b.min[1] + (-0.02 + 0.01 * rng.gauss()) * metre,
+            rng.range(b.min[2] - 0.6 * metre, b.max[2] + 0.6 * metre),
         ]);
     }
     let noise = 15;
     for _ in 0..noise {
-        positions.push([0, 1, 2].map(|i| rng.range(b.min[i] - 2.0, b.max[i] + 2.0)));
+        positions
+            .push([0, 1, 2].map(|i| rng.range(b.min[i] - 2.0 * metre, b.max[i] + 2.0 * metre)));
     }
     let other = n / 20;
     let zc = rng.range(b.min[2], b.max[2]);
     for _ in 0..other {
         positions.push([
-            b.max[0] + 0.4,
-            b.min[1] + rng.range(0.0, 1.5),
-            zc + rng.range(0.0, 1.0),
+            b.max[0] + 0.4 * metre,
+            b.min[1] + rng.range(0.0, 1.5) * metre,
+            zc + rng.range(0.0, 1.0) * metre,
         ]);
     }
     let colors = cloud.colors.as_ref().map(|c| {

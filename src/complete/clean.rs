@@ -25,8 +25,9 @@ const SPACING_NEIGHBOUR: usize = 4;
 /// A point whose neighbour spacing exceeds this multiple of the median is isolated.
 const ISOLATED: f64 = 6.0;
 /// Points join one object when within this multiple of the median spacing, or this share of
-/// the longest side, whichever is larger.
-const LINK_SPACINGS: f64 = 8.0;
+/// the longest side, whichever is larger. 12 is the middle of the reach a plain voxel grid of 8
+/// had (docs/orientation.md, *Cleaning segmented scans*): 8 parted sparse cars.
+const LINK_SPACINGS: f64 = 12.0;
 const LINK_SHARE: f64 = 0.02;
 /// Another component is kept when it has this share of the largest one's points.
 const KEEP_SHARE: f64 = 0.25;
@@ -171,17 +172,25 @@ fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
         .then(|| [solved[0], solved[1], solved[2]])
 }
 
-/// Indices (of `points`, among `candidates`) outside the main object: connected components on
-/// a voxel grid of side `link`, keeping the largest and those of at least a quarter its size.
+/// Indices (of `points`, among `candidates`) outside the main object: connected components of
+/// the points within `link` of each other, keeping the largest and those of at least a quarter
+/// its size. Points share a voxel of side `link` as one; two neighbouring voxels join only where
+/// a point of each lies within `link` of the other, so that how far apart two objects may stand
+/// and still join does not hang on where the grid falls (neighbouring voxels alone join points
+/// from one to two `link` apart along an axis).
 fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<usize> {
     if candidates.is_empty() || link <= 0.0 {
         return Vec::new();
     }
     let key = |p: &[f64; 3]| p.map(|v| (v / link).floor() as i64);
-    let mut voxels: HashMap<[i64; 3], usize> = HashMap::new();
+    let mut voxels: HashMap<[i64; 3], (usize, Vec<usize>)> = HashMap::new();
     for &i in candidates {
         let n = voxels.len();
-        voxels.entry(key(&points[i])).or_insert(n);
+        voxels
+            .entry(key(&points[i]))
+            .or_insert((n, Vec::new()))
+            .1
+            .push(i);
     }
     let mut parent: Vec<usize> = (0..voxels.len()).collect();
     fn root(parent: &mut [usize], mut i: usize) -> usize {
@@ -191,15 +200,25 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
         }
         i
     }
-    for (v, &id) in &voxels {
+    let near = |a: &[usize], b: &[usize]| {
+        a.iter().any(|&i| {
+            b.iter().any(|&j| {
+                let d: f64 = (0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum();
+                d <= link * link
+            })
+        })
+    };
+    for (v, (id, members)) in &voxels {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(&other) = voxels.get(&[v[0] + dx, v[1] + dy, v[2] + dz]) {
-                        let (a, b) = (root(&mut parent, id), root(&mut parent, other));
-                        if a != b {
-                            parent[a] = b;
-                        }
+                    let Some((other, theirs)) = voxels.get(&[v[0] + dx, v[1] + dy, v[2] + dz])
+                    else {
+                        continue;
+                    };
+                    let (a, b) = (root(&mut parent, *id), root(&mut parent, *other));
+                    if a != b && near(members, theirs) {
+                        parent[a] = b;
                     }
                 }
             }
@@ -207,7 +226,7 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
     }
     let component: Vec<usize> = candidates
         .iter()
-        .map(|&i| root(&mut parent, voxels[&key(&points[i])]))
+        .map(|&i| root(&mut parent, voxels[&key(&points[i])].0))
         .collect();
     let mut sizes: HashMap<usize, usize> = HashMap::new();
     for &c in &component {
@@ -273,6 +292,33 @@ mod tests {
         assert_eq!(report.other_objects, other, "{report:?}");
         assert_eq!(cleaned.len(), car);
         assert_eq!(cleaned.positions[..], cloud.positions[..car]);
+    }
+
+    /// A wall of 40 × 40 points 0.01 apart at x = `x0`, and one of 10 × 10 at `x0 + gap`.
+    fn two_walls(x0: f64, gap: f64) -> Vec<[f64; 3]> {
+        let wall = |x: f64, n: usize| {
+            (0..n * n).map(move |i| [x, 0.01 * (i / n) as f64, 0.01 * (i % n) as f64])
+        };
+        wall(x0, 40).chain(wall(x0 + gap, 10)).collect()
+    }
+
+    #[test]
+    fn objects_join_within_the_link_wherever_the_grid_falls() {
+        let link = 0.1;
+        for shift in [0.0, 0.03, 0.06, 0.09, 0.099] {
+            let apart = two_walls(shift, 1.5 * link);
+            let all: Vec<usize> = (0..apart.len()).collect();
+            assert_eq!(
+                other_objects(&apart, &all, link),
+                (1600..1700).collect::<Vec<_>>(),
+                "shift {shift}"
+            );
+            let close = two_walls(shift, 0.9 * link);
+            assert!(
+                other_objects(&close, &all, link).is_empty(),
+                "shift {shift}"
+            );
+        }
     }
 
     #[test]

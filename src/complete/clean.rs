@@ -200,14 +200,6 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
         }
         i
     }
-    let near = |a: &[usize], b: &[usize]| {
-        a.iter().any(|&i| {
-            b.iter().any(|&j| {
-                let d: f64 = (0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum();
-                d <= link * link
-            })
-        })
-    };
     for (v, (id, members)) in &voxels {
         for dx in -1..=1 {
             for dy in -1..=1 {
@@ -217,7 +209,7 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
                         continue;
                     };
                     let (a, b) = (root(&mut parent, *id), root(&mut parent, *other));
-                    if a != b && near(members, theirs) {
+                    if a != b && any_within(points, members, theirs, link) {
                         parent[a] = b;
                     }
                 }
@@ -239,6 +231,16 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
         .filter(|(_, c)| (sizes[c] as f64) < KEEP_SHARE * largest as f64)
         .map(|(&i, _)| i)
         .collect()
+}
+
+/// Whether some point of `a` lies within `link` of some point of `b` (indices of `points`).
+fn any_within(points: &[[f64; 3]], a: &[usize], b: &[usize], link: f64) -> bool {
+    a.iter().any(|&i| {
+        b.iter().any(|&j| {
+            let d: f64 = (0..3).map(|k| (points[i][k] - points[j][k]).powi(2)).sum();
+            d <= link * link
+        })
+    })
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@ use mvpcc::complete::{Method, Options, Roll, DEFAULT_MODEL};
 use mvpcc::core::camera::{parse_view_set, DEFAULT_VIEWS};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
-use mvpcc::datagen::mesh::SignedAxis;
+use mvpcc::datagen::mesh::{Forward, SignedAxis};
 use mvpcc::datagen::scan::{PartialKinds, PartialParams};
 use mvpcc::datagen::synth::Draw;
 use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
@@ -626,9 +626,10 @@ pub struct PrepareArgs {
     /// The meshes' up axis (x, y, z, -x, -y, -z).
     #[arg(long, default_value = "y", allow_hyphen_values = true)]
     pub up: SignedAxis,
-    /// The axis the meshes' fronts point along (ShapeNet: -z).
+    /// The axis the meshes' fronts point along (ShapeNet: -z), or auto: the longer horizontal
+    /// side of each mesh's box is its length, which end is the front left undecided.
     #[arg(long, default_value = "-z", allow_hyphen_values = true)]
-    pub forward: SignedAxis,
+    pub forward: Forward,
     /// Which partial clouds are written as PLY beside the views (gt.ply always is).
     #[arg(long, value_enum, default_value_t = CloudPolicy::Test)]
     pub clouds: CloudPolicy,

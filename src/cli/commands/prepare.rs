@@ -7,6 +7,7 @@ use mvpcc::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareParams, Skipped,
     Source, ViewsFrame, MANIFEST_FILE, MAX_SAMPLES, PARAMS_FILE, TEST, TRAIN,
 };
+use mvpcc::datagen::mesh::Forward;
 use mvpcc::datagen::scan::{PartialParams, MAX_PARTIAL_POINTS};
 use mvpcc::io::atomic_write;
 use mvpcc::io::batch::lies_in;
@@ -227,7 +228,7 @@ fn check(args: &PrepareArgs) -> anyhow::Result<()> {
     if !(args.gt_voxel >= 0.0 && args.noise >= 0.0 && args.yaw_error >= 0.0) {
         bail!("--gt-voxel, --noise and --yaw-error must not be negative");
     }
-    if args.up.axis == args.forward.axis {
+    if matches!(args.forward, Forward::Axis(f) if f.axis == args.up.axis) {
         bail!(
             "--up {} and --forward {} must be different axes",
             args.up,

@@ -7,7 +7,9 @@ use super::{
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::PointCloud;
 use crate::core::rng::{derive_seed, Lcg};
-use crate::datagen::mesh::{read_mesh, Mesh, MeshError, MeshStats, ReadOptions, SignedAxis};
+use crate::datagen::mesh::{
+    read_mesh, Forward, Mesh, MeshError, MeshStats, ReadOptions, SignedAxis,
+};
 use crate::datagen::raster::{render_views, Surface};
 use crate::datagen::scan::{ground_truth, partial};
 use crate::io::{atomic_write, write_cloud, CloudIoError, Encoding, Format};
@@ -183,7 +185,8 @@ fn normalized_mesh(
     )?;
     let stats = mesh.check(path, params.max_triangles)?;
     let up: SignedAxis = params.up.parse().map_err(normalize_error)?;
-    let forward: SignedAxis = params.forward.parse().map_err(normalize_error)?;
+    let forward: Forward = params.forward.parse().map_err(normalize_error)?;
+    let forward = forward.resolve(&mesh, up);
     let scale = mesh.normalize(up, forward).map_err(normalize_error)?;
     Ok((mesh, stats, scale))
 }

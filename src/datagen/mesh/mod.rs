@@ -132,6 +132,58 @@ impl std::str::FromStr for SignedAxis {
     }
 }
 
+/// Which way a mesh's front points: an axis, or `auto` (the longer horizontal side of its box
+/// is the length, which end is the front left undecided) for collections that mix conventions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Forward {
+    Axis(SignedAxis),
+    Auto,
+}
+
+impl Forward {
+    /// The axis the front points along in `mesh` whose up axis is `up`: for `auto` the longer
+    /// of the two horizontal sides of its box, as its negative direction (ShapeNet's −z is
+    /// negative too).
+    pub fn resolve(self, mesh: &Mesh, up: SignedAxis) -> SignedAxis {
+        match self {
+            Forward::Axis(axis) => axis,
+            Forward::Auto => {
+                let (lo, hi) = mesh.bounds();
+                let axis = (0..3)
+                    .filter(|&a| a != up.axis)
+                    .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+                    .unwrap_or((up.axis + 1) % 3);
+                SignedAxis {
+                    axis,
+                    negative: true,
+                }
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for Forward {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "auto" => Ok(Forward::Auto),
+            _ => text
+                .parse()
+                .map(Forward::Axis)
+                .map_err(|e: String| format!("{e}, or auto")),
+        }
+    }
+}
+
+impl std::fmt::Display for Forward {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Forward::Axis(axis) => axis.fmt(f),
+            Forward::Auto => f.write_str("auto"),
+        }
+    }
+}
+
 impl std::fmt::Display for SignedAxis {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let sign = if self.negative { "-" } else { "" };
@@ -442,6 +494,28 @@ mod tests {
         assert!(m
             .normalize(SignedAxis::PLUS_Y, "-y".parse().unwrap())
             .is_err());
+    }
+
+    #[test]
+    fn forward_auto_takes_the_longer_horizontal_side_as_the_length() {
+        // 4 long along x, 2 wide along z, 1 high along y: auto must lay x along z.
+        let mut m = Mesh {
+            positions: vec![[0.0, 0.0, 0.0], [4.0, 1.0, 2.0], [4.0, 0.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+            material_of: vec![0],
+            materials: vec![Material::plain("m", [1, 2, 3])],
+            ..Mesh::default()
+        };
+        let forward: Forward = "auto".parse().unwrap();
+        let axis = forward.resolve(&m, SignedAxis::PLUS_Y);
+        assert_eq!(axis.axis, 0);
+        m.normalize(SignedAxis::PLUS_Y, axis).unwrap();
+        let (lo, hi) = m.bounds();
+        assert_eq!((hi[2] - lo[2], hi[0] - lo[0]), (1.0, 0.5));
+        // Now 1 long along z, 0.5 along x, 0.25 along y: with x up, z is the longer of y and z.
+        assert_eq!(forward.resolve(&m, "x".parse().unwrap()).axis, 2);
+        assert_eq!(forward.to_string(), "auto");
+        assert!("sideways".parse::<Forward>().is_err());
     }
 
     #[test]

@@ -7,14 +7,18 @@
 //! completed as `complete --vehicle-width W` would with its object's true width (the ground
 //! truth's x extent), which measures what knowing the width is worth.
 //!
-//! Real scans given with `--mls DIR` (PCD, y up) are completed the same way, as they are and
-//! turned by five random headings: the plane's fit, the far side's measured extent against
-//! the mirrored near flank (metres; above zero, measured far points stick out beyond the
-//! mirror image, so the plane sits too near the scanned side), and how far the planes found
-//! on the turned scans, turned back, lie from the plane of the scan as it is.
+//! With `--true-heading` the partials are laid in their object's frame and completed with
+//! `--orient none`, so the plane alone is measured.
 //!
-//! `cargo run --release --example symmetry -- --data DATA [--true-width] [--limit N]
-//! [--json FILE] [--mls DIR] [--seed N]`
+//! Real scans given with `--mls DIR` (PCD, y up) are turned by `--turns` (8) random headings
+//! each and completed as `mvpcc complete` does (the network method, everything estimated):
+//! the output's width over its length and how far it reaches beyond the scan's own extent
+//! across the width (a plane off the middle draws the far flank outside the vehicle), the
+//! warnings, and how far the mirror method's plane, turned back, lies from the plane of the
+//! scan as it is.
+//!
+//! `cargo run --release --example symmetry -- --data DATA [--true-width] [--true-heading]
+//! [--limit N] [--json FILE]` or `-- --mls DIR [--seed N] [--turns N] [--json FILE]`
 //!
 //! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset;
 //! small gains are checked on three more seeds, docs/completing.md); the test split is measured
@@ -45,6 +49,25 @@ fn arg(name: &str) -> Option<String> {
         .and_then(|i| args.get(i + 1).cloned())
 }
 
+/// What the measurement is told of the truth instead of estimating it.
+#[derive(Debug, Clone, Copy)]
+struct Given {
+    /// The object's width (`--true-width`).
+    width: bool,
+    /// The object's heading (`--true-heading`).
+    heading: bool,
+}
+
+/// Where each cue of the plane put it across the object's centre line, over its length,
+/// positive towards the side holding more of the measured points.
+#[derive(Debug, Clone, Serialize)]
+struct CueErrors {
+    pairs: Option<f64>,
+    extent: Option<f64>,
+    tyres: Option<f64>,
+    width: Option<f64>,
+}
+
 /// One partial's plane errors and mirror scores.
 #[derive(Debug, Clone, Serialize)]
 struct Sample {
@@ -64,6 +87,8 @@ struct Sample {
     towards_seen: Option<f64>,
     /// How the plane was found (`PlaneFit`), `None` when it was not.
     fit: Option<String>,
+    /// Where each cue put the plane, as `towards_seen`.
+    cues: CueErrors,
     /// F1@0.01 of the partial alone, of the mirror completion and of the mirror about the
     /// true plane.
     f1_partial: f64,
@@ -71,17 +96,30 @@ struct Sample {
     f1_true: f64,
 }
 
-/// `complete --method mirror` with everything estimated.
+/// `complete --method mirror` with everything estimated, or the heading taken as the input's
+/// axes (`orient`).
 fn mirrored(
     completer: &Completer,
     cloud: &PointCloud,
     vehicle_width: Option<f64>,
+    orient: OrientMode,
+) -> Result<Completion, Error> {
+    completed(completer, cloud, vehicle_width, orient, Method::Mirror)
+}
+
+/// `complete --method METHOD` with the given orientation.
+fn completed(
+    completer: &Completer,
+    cloud: &PointCloud,
+    vehicle_width: Option<f64>,
+    orient: OrientMode,
+    method: Method,
 ) -> Result<Completion, Error> {
     let settings = Settings {
         clean: false,
-        orient: OrientMode::Auto,
+        orient,
         options: Options {
-            method: Method::Mirror,
+            method,
             vehicle_width,
             ..Options::default()
         },
@@ -114,41 +152,70 @@ fn measure(
     partial: &Path,
     gt: &[[f64; 3]],
     spec: &PartialSpec,
-    given_width: bool,
+    given: Given,
 ) -> Result<Sample, Error> {
-    let cloud = read_cloud(partial, None)?.cloud;
+    let mut cloud = read_cloud(partial, None)?.cloud;
     let bounds = Aabb::of(gt).ok_or("empty ground truth")?;
-    let width = given_width.then(|| bounds.max[0] - bounds.min[0]);
-    let completion = mirrored(completer, &cloud, width)?;
-    let measured = spec.points_to_object_frame(&cloud.positions);
-    let completed = spec.points_to_object_frame(&completion.cloud.positions);
+    let width = given.width.then(|| bounds.max[0] - bounds.min[0]);
+    // With the true heading the partial is laid in the object's frame, whose axes are the
+    // vehicle's, and `--orient none` keeps them.
+    let orient = if given.heading {
+        cloud.positions = spec.points_to_object_frame(&cloud.positions);
+        OrientMode::None
+    } else {
+        OrientMode::Auto
+    };
+    let to_object = |points: &[[f64; 3]]| {
+        if given.heading {
+            points.to_vec()
+        } else {
+            spec.points_to_object_frame(points)
+        }
+    };
+    let completion = mirrored(completer, &cloud, width, orient)?;
+    let measured = to_object(&cloud.positions);
+    let completed = to_object(&completion.cloud.positions);
     let length = bounds.longest_side();
     let seen_side = measured.iter().map(|p| p[0]).sum::<f64>().signum();
+    let frame = &completion.frame;
+    // A plane `x = c` of the completion's frame in the object's: its distance from the
+    // object's centre, the angle between the planes, and where it crosses the centre line.
+    let locate = |c: f64| {
+        let [on, ahead] = [c, c + 1.0]
+            .map(|x| frame.to_input([x, 0.0, 0.0]))
+            .map(|p| to_object(&[p])[0]);
+        let n = [0, 1, 2].map(|i| ahead[i] - on[i]);
+        let norm = n.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let n = n.map(|v| v / norm);
+        let centre = [0.0, bounds.center()[1], bounds.center()[2]];
+        let distance = (0..3).map(|i| n[i] * (centre[i] - on[i])).sum::<f64>();
+        let angle = n[0].abs().min(1.0).acos().to_degrees();
+        let x = on[0] - (n[1] * (centre[1] - on[1]) + n[2] * (centre[2] - on[2])) / n[0];
+        (distance.abs() / length, angle, x / length)
+    };
     let (offset, angle, towards_scanner, towards_seen) = match completion.plane {
         Some(plane) => {
-            let frame = &completion.frame;
-            let [on, ahead] = [plane.offset, plane.offset + 1.0]
-                .map(|x| frame.to_input([x, 0.0, 0.0]))
-                .map(|p| spec.points_to_object_frame(&[p])[0]);
-            let n = [0, 1, 2].map(|i| ahead[i] - on[i]);
-            let norm = n.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let n = n.map(|v| v / norm);
-            let centre = [0.0, bounds.center()[1], bounds.center()[2]];
-            let distance = (0..3).map(|i| n[i] * (centre[i] - on[i])).sum::<f64>();
-            let angle = n[0].abs().min(1.0).acos().to_degrees();
-            let x = on[0] - (n[1] * (centre[1] - on[1]) + n[2] * (centre[2] - on[2])) / n[0];
+            let (distance, angle, x) = locate(plane.offset);
             let side = match spec {
                 PartialSpec::Scanner { side, .. } => Some(f64::from(*side)),
                 PartialSpec::Cameras { .. } => None,
             };
             (
-                Some(distance.abs() / length),
+                Some(distance),
                 Some(angle),
-                side.map(|s| s * x / length),
-                Some(seen_side * x / length),
+                side.map(|s| s * x),
+                Some(seen_side * x),
             )
         }
         None => (None, None, None, None),
+    };
+    let cues = completion.plane.map(|p| p.cues).unwrap_or_default();
+    let cue = |c: Option<f64>| c.map(|c| seen_side * locate(c).2);
+    let cues = CueErrors {
+        pairs: cue(cues.pairs),
+        extent: cue(cues.extent),
+        tyres: cue(cues.tyres),
+        width: cue(cues.width),
     };
     let tolerance = completion
         .plane
@@ -162,6 +229,7 @@ fn measure(
         towards_scanner,
         towards_seen,
         fit: completion.plane.map(|p| format!("{:?}", p.fit)),
+        cues,
         f1_partial: f1(&measured, gt),
         f1_mirror: f1(&completed, gt),
         f1_true: f1(&true_mirror(&measured, tolerance), gt),
@@ -216,58 +284,91 @@ fn turned(p: [f64; 3], turn: f64, pivot: [f64; 3]) -> [f64; 3] {
     [pivot[0] + c * x + s * z, p[1], pivot[2] - s * x + c * z]
 }
 
-/// A completion's plane in the input's coordinates (a point on it and its unit normal), its
-/// fit, and the far side's measured extent beyond the mirrored near flank, in input units.
+/// A completion's plane in the input's coordinates: a point on it and its unit normal.
 struct FoundPlane {
     point: [f64; 3],
     normal: [f64; 3],
-    fit: String,
-    far_beyond_mirror: f64,
 }
 
 fn plane_of(completer: &Completer, cloud: &PointCloud) -> Result<Option<FoundPlane>, Error> {
-    let done = mirrored(completer, cloud, None)?;
+    let done = mirrored(completer, cloud, None, OrientMode::Auto)?;
     let Some(plane) = done.plane else {
         return Ok(None);
     };
-    let c = plane.offset;
-    let xs: Vec<f64> = done.input_normalized.iter().map(|p| p[0] - c).collect();
-    let mean = xs.iter().sum::<f64>() / xs.len() as f64;
-    let side = mean.signum();
-    let mut near: Vec<f64> = xs.iter().map(|x| x * side).filter(|x| *x > 0.0).collect();
-    let mut far: Vec<f64> = xs.iter().map(|x| -x * side).filter(|x| *x > 0.0).collect();
-    let far_beyond_mirror =
-        (quantile(&mut far, 0.98) - quantile(&mut near, 0.98)) * done.frame.extent;
-    let point = done.frame.to_input([c, 0.0, 0.0]);
-    let ahead = done.frame.to_input([c + 1.0, 0.0, 0.0]);
+    let point = done.frame.to_input([plane.offset, 0.0, 0.0]);
+    let ahead = done.frame.to_input([plane.offset + 1.0, 0.0, 0.0]);
     let n = [0, 1, 2].map(|i| ahead[i] - point[i]);
     let norm = n.iter().map(|v| v * v).sum::<f64>().sqrt();
     Ok(Some(FoundPlane {
         point,
         normal: n.map(|v| v / norm),
-        fit: format!("{:?}", plane.fit),
-        far_beyond_mirror,
     }))
 }
 
-fn real_scans(completer: &Completer, dir: &str, seed: u64) -> Result<(), Error> {
+/// What `complete` (the network method, everything estimated) made of one turned real scan,
+/// across the vehicle's width in the completion's own frame.
+#[derive(Debug, Serialize)]
+struct Turned {
+    scan: String,
+    turn: f64,
+    /// The output's extent across the width over the scan's length.
+    width_over_length: f64,
+    /// The same for the 0.5–99.5 % of its points across the width.
+    body_width_over_length: f64,
+    /// How far the output reaches beyond the scan's own extent across the width, either side,
+    /// over the scan's length.
+    beyond_scan: f64,
+    /// Distance of this plane, turned back, from the plane of the scan as it is (input units).
+    plane_apart: Option<f64>,
+    fit: Option<String>,
+    warnings: Vec<String>,
+}
+
+fn extent(points: &[[f64; 3]], axis: usize) -> (f64, f64) {
+    points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p[axis]), hi.max(p[axis]))
+        })
+}
+
+/// `completion`'s width over length (its whole extent across, and that of the 0.5–99.5 % of
+/// its points, which leaves out a wing mirror's few points and stray ones) and its reach
+/// beyond the scan, in its own frame.
+fn across(completion: &Completion) -> (f64, f64, f64) {
+    let (in_lo, in_hi) = extent(&completion.input_normalized, 0);
+    let (out_lo, out_hi) = extent(&completion.normalized, 0);
+    let (z_lo, z_hi) = extent(&completion.input_normalized, 2);
+    let length = z_hi - z_lo;
+    let beyond = (out_hi - in_hi).max(in_lo - out_lo).max(0.0);
+    let mut xs: Vec<f64> = completion.normalized.iter().map(|p| p[0]).collect();
+    let body = quantile(&mut xs, 0.995) - quantile(&mut xs, 0.005);
+    ((out_hi - out_lo) / length, body / length, beyond / length)
+}
+
+fn real_scans(
+    completer: &Completer,
+    dir: &str,
+    seed: u64,
+    turns: usize,
+) -> Result<Vec<Turned>, Error> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "pcd"))
         .collect();
     files.sort();
     let mut rng = Lcg::new(seed);
+    let mut rows = Vec::new();
+    println!(
+        "{:<12} {:>7} {:>6} {:>6} {:>7} {:>9} {:<9} warnings",
+        "scan", "turn", "w/l", "body", "beyond", "apart m", "fit"
+    );
     for path in &files {
         let cloud = read_cloud(path, None)?.cloud;
         let name = path.file_name().unwrap_or_default().to_string_lossy();
-        let Some(own) = plane_of(completer, &cloud)? else {
-            println!("{name:<12} no plane");
-            continue;
-        };
+        let own = plane_of(completer, &cloud)?;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-        let mut apart: Vec<f64> = Vec::new();
-        let mut angles: Vec<f64> = Vec::new();
-        for _ in 0..5 {
+        for _ in 0..turns {
             let turn = rng.range(-180.0, 180.0);
             let rotated = PointCloud {
                 positions: cloud
@@ -277,41 +378,65 @@ fn real_scans(completer: &Completer, dir: &str, seed: u64) -> Result<(), Error> 
                     .collect(),
                 ..cloud.clone()
             };
-            let Some(found) = plane_of(completer, &rotated)? else {
-                apart.push(f64::INFINITY);
-                continue;
+            let found = plane_of(completer, &rotated)?;
+            let plane_apart = match (&own, &found) {
+                (Some(own), Some(found)) => {
+                    let point = turned(found.point, -turn, pivot);
+                    Some(
+                        (0..3)
+                            .map(|i| own.normal[i] * (point[i] - own.point[i]))
+                            .sum::<f64>()
+                            .abs(),
+                    )
+                }
+                _ => None,
             };
-            let point = turned(found.point, -turn, pivot);
-            let normal = turned(found.normal, -turn, [0.0; 3]);
-            let dot = (0..3).map(|i| normal[i] * own.normal[i]).sum::<f64>();
-            angles.push(dot.abs().min(1.0).acos().to_degrees());
-            apart.push(
-                (0..3)
-                    .map(|i| own.normal[i] * (point[i] - own.point[i]))
-                    .sum::<f64>()
-                    .abs(),
+            let done = completed(completer, &rotated, None, OrientMode::Auto, Method::Network)?;
+            let (width_over_length, body_width_over_length, beyond_scan) = across(&done);
+            let row = Turned {
+                scan: name.to_string(),
+                turn,
+                width_over_length,
+                body_width_over_length,
+                beyond_scan,
+                plane_apart,
+                fit: done.plane.map(|p| format!("{:?}", p.fit)),
+                warnings: done.warnings.clone(),
+            };
+            println!(
+                "{:<12} {:>6.1}° {:>6.3} {:>6.3} {:>6.2}% {:>9} {:<9} {}",
+                row.scan,
+                row.turn,
+                row.width_over_length,
+                row.body_width_over_length,
+                100.0 * row.beyond_scan,
+                row.plane_apart.map_or("-".into(), |d| format!("{d:.4}")),
+                row.fit.as_deref().unwrap_or("none"),
+                row.warnings.join(" | ")
             );
+            rows.push(row);
         }
-        let worst = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
-        println!(
-            "{name:<12} fit {:<9} far side beyond the mirrored near flank {:>6.3} m; turned ×5: planes within {:.4} m, {:.3}°",
-            own.fit,
-            own.far_beyond_mirror,
-            worst(&apart),
-            worst(&angles)
-        );
     }
-    Ok(())
+    Ok(rows)
 }
 
 fn main() -> Result<(), Error> {
     if let Some(dir) = arg("--mls") {
         let completer = Completer::builtin(Device::flex())?;
         let seed = arg("--seed").map_or(Ok(1), |s| s.parse())?;
-        return real_scans(&completer, &dir, seed);
+        let turns = arg("--turns").map_or(Ok(8), |s| s.parse())?;
+        let rows = real_scans(&completer, &dir, seed, turns)?;
+        if let Some(path) = arg("--json") {
+            std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
+        }
+        return Ok(());
     }
     let data = PathBuf::from(arg("--data").ok_or("--data DIR is required")?);
-    let given_width = std::env::args().any(|a| a == "--true-width");
+    let flag = |name: &str| std::env::args().any(|a| a == name);
+    let given = Given {
+        width: flag("--true-width"),
+        heading: flag("--true-heading"),
+    };
     let limit: usize = arg("--limit").map_or(Ok(usize::MAX), |l| l.parse())?;
     let manifest: Manifest =
         serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json"))?)?;
@@ -332,7 +457,7 @@ fn main() -> Result<(), Error> {
             let partial = clouds.join(format!("partial_{}.ply", sample.k));
             let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
             let names = (name, model.category.clone());
-            measure(&completer, names, &partial, &gt, &sample.spec, given_width)
+            measure(&completer, names, &partial, &gt, &sample.spec, given)
         })
         .collect::<Result<_, Error>>()?;
 

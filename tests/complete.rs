@@ -141,6 +141,17 @@ fn completes_in_the_input_frame_keeping_every_input_point() {
         ["supported", "refined", "pairs", "held-back"].contains(&plane["fit"].as_str().unwrap()),
         "{plane}"
     );
+    // Each cue is reported on its own, in the plane's `x`; a car scanned from one side has its
+    // mirror pairs and the extent of its slices, and they agree, so the plane is vouched for.
+    assert_eq!(plane["vouched"], true, "{plane}");
+    let x = plane["x"].as_f64().unwrap();
+    for cue in ["pairs", "extent"] {
+        let at = plane["cues"][cue].as_f64().unwrap_or(f64::NAN);
+        assert!(
+            (at - x).abs() < 0.02,
+            "{cue} at {at}, the plane at {x}: {plane}"
+        );
+    }
 
     let png = image::open(&preview).unwrap();
     assert!(png.width() > 300 && png.height() > 300);

@@ -268,6 +268,9 @@ mod tests {
             support: 0.5,
             tolerance: 0.01,
             fit: PlaneFit::Refined,
+            cues: Default::default(),
+            vouched: true,
+            both_sides: false,
         };
         let predicted = PointCloud::from_positions(vec![
             [-0.3, 0.0, 0.0],

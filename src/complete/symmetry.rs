@@ -52,6 +52,42 @@ pub struct Plane {
     pub tolerance: f64,
     /// Which step of [`find_plane`] placed it.
     pub fit: PlaneFit,
+    /// What each cue said of the offset, in the same frame.
+    pub cues: Cues,
+    /// Whether the cues agree well enough to draw the plane's mirror image: false where the
+    /// plane found would have made the vehicle implausibly wide (see [`PlaneFit::Proportions`]).
+    pub vouched: bool,
+    /// Whether the scan shows both flanks (under three quarters of its points on one side of
+    /// its box's middle), so that its extent across the width is the vehicle's.
+    pub both_sides: bool,
+}
+
+/// Where each cue of [`find_plane`] puts the plane `x = c`, each found on its own; `None` where
+/// a cue has nothing to say.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct Cues {
+    /// The mirror pairs: the best-supported offset pulled by point-to-plane ICP (steps 1–2).
+    pub pairs: Option<f64>,
+    /// The scan's own extent (step 3): on a scan of one side the middle of the horizontal
+    /// slice seen widest on both sides, the plane itself where that slice's far edge is seen,
+    /// else a bound towards the scanned side; on a scan of both flanks the middle of its box.
+    pub extent: Option<f64>,
+    /// Half-way between the near and the far tyre tracks (step 4).
+    pub tyres: Option<f64>,
+    /// Half the given vehicle width from the scanned flank.
+    pub width: Option<f64>,
+}
+
+impl Cues {
+    /// Each cue's offset mapped by `f` (into another frame).
+    pub fn map(self, f: impl Fn(f64) -> f64) -> Cues {
+        Cues {
+            pairs: self.pairs.map(&f),
+            extent: self.extent.map(&f),
+            tyres: self.tyres.map(&f),
+            width: self.width.map(&f),
+        }
+    }
 }
 
 /// How [`find_plane`] placed a plane.
@@ -72,6 +108,9 @@ pub enum PlaneFit {
     /// Half the vehicle's given width from the scanned flank: the plane found lay nearer it,
     /// or none was found (see [`find_plane`]).
     Width,
+    /// At the middle of the scan's extent: the plane found would have drawn a vehicle wider
+    /// than any road vehicle is for its length (see [`find_plane`]).
+    Proportions,
 }
 
 /// Finds `x = c` in four steps:
@@ -132,10 +171,77 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         sample.plane(offset, fit)
     });
     let found = to_the_tyres(points, &bounds, &seen, &sample, found);
-    match width {
+    let found = match width {
         Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
+    };
+    let slices = if seen.one_sided {
+        seen.slices.clone()
+    } else {
+        horizontal_slices(points, &bounds)
+    };
+    let cues = Cues {
+        pairs: pulled.or(supported.then_some(best)),
+        extent: if seen.one_sided {
+            slices_middle(points, &bounds, &slices, seen.side)
+        } else {
+            Some(bounds.center()[0])
+        },
+        tyres: between_the_tracks(points, &bounds, seen.side).map(|t| t.middle),
+        width: width.and_then(|w| {
+            let flank = scanned_flank(points, &slices, seen.side)?;
+            Some(seen.side * (flank - w / 2.0))
+        }),
+    };
+    let both_sides = !seen.one_sided;
+    let found = found.map(|p| Plane {
+        cues,
+        both_sides,
+        ..p
+    });
+    in_proportion(points, &bounds, &slices, &sample, cues.extent, found)
+}
+
+/// The widest a road vehicle is for its length, wing mirrors included: cars are 0.38–0.47 of
+/// their length wide without them (real scans, generated and third-party meshes), the widest
+/// generated car with them 0.53; the frame makes the length the longer horizontal side.
+const MAX_WIDTH: f64 = 0.55;
+
+/// Step 5 of [`find_plane`]: on a scan no wider than [`MAX_WIDTH`] of its length, a plane that
+/// would put either flank's mirror image more than that from the other flank is no vehicle's,
+/// so it goes to the middle
+/// of the scan's own extent (`extent`, [`slices_middle`]; of the whole box where there is
+/// none), the cue a plane far off the middle contradicts most, and is not vouched for.
+/// `slices` are the points' [`horizontal_slices`].
+fn in_proportion(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    slices: &[Vec<usize>],
+    sample: &Sample,
+    extent: Option<f64>,
+    found: Option<Plane>,
+) -> Option<Plane> {
+    let plane = found?;
+    let length = bounds.max[2] - bounds.min[2];
+    // A scan already wider than that is no road vehicle seen along its length (or its heading
+    // is off), and the proportions say nothing of it.
+    if bounds.max[0] - bounds.min[0] > MAX_WIDTH * length {
+        return Some(plane);
     }
+    let widest = [-1.0, 1.0]
+        .into_iter()
+        .filter_map(|side| Some(scanned_flank(points, slices, side)? - side * plane.offset))
+        .fold(0.0, f64::max);
+    if 2.0 * widest <= MAX_WIDTH * length {
+        return Some(plane);
+    }
+    let middle = extent.unwrap_or_else(|| bounds.center()[0]);
+    Some(Plane {
+        cues: plane.cues,
+        vouched: false,
+        both_sides: plane.both_sides,
+        ..sample.plane(middle, PlaneFit::Proportions)
+    })
 }
 
 /// Step 4 of [`find_plane`]: the plane `found` on a one-sided cloud moved to the middle between
@@ -687,6 +793,9 @@ impl Sample {
             support: self.support(ACROSS, c),
             tolerance: self.tolerance,
             fit,
+            cues: Cues::default(),
+            vouched: true,
+            both_sides: false,
         }
     }
 
@@ -990,6 +1099,9 @@ mod tests {
             support: 0.3,
             tolerance: 0.01,
             fit: PlaneFit::HeldBack,
+            cues: Cues::default(),
+            vouched: true,
+            both_sides: false,
         };
         let widened = widen(&points, 0.4, Some(at(0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
@@ -1042,6 +1154,37 @@ mod tests {
         let roof = -0.005 * FAR_EDGE / 2.0;
         let slices = horizontal_slices(&points, &bounds);
         assert!((slices_middle(&points, &bounds, &slices, 1.0).unwrap() - roof).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_plane_that_would_make_the_vehicle_too_wide_goes_to_the_middle_unvouched() {
+        // One unit long: a near flank at x = 0.2 up to the shoulder and a roof seen edge to
+        // edge at y = 0.3 from -0.15 to 0.15 (the scan's extent says the plane is at 0).
+        let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
+        section.extend((0..=30).map(|i| [-0.15 + i as f64 * 0.01, 0.3]));
+        let points: Vec<[f64; 3]> = (0..=100)
+            .flat_map(|k| section.iter().map(move |&[x, y]| [x, y, k as f64 * 0.01]))
+            .collect();
+        let bounds = Aabb::of(&points).unwrap();
+        let sample = Sample::of(&points, SAMPLE, MIN_LEVER).unwrap();
+        let slices = horizontal_slices(&points, &bounds);
+        let extent = slices_middle(&points, &bounds, &slices, 1.0);
+        let check = |offset: f64| {
+            let found = Some(sample.plane(offset, PlaneFit::Refined));
+            in_proportion(&points, &bounds, &slices, &sample, extent, found).unwrap()
+        };
+        // 0.4 wide for its length of 1: a car's proportions, kept.
+        let kept = check(0.0);
+        assert_eq!(
+            (kept.offset, kept.fit, kept.vouched),
+            (0.0, PlaneFit::Refined, true)
+        );
+        // At -0.1 the near flank's mirror image would make it 0.6 wide.
+        let moved = check(-0.1);
+        assert_eq!((moved.fit, moved.vouched), (PlaneFit::Proportions, false));
+        assert!(moved.offset.abs() < 0.01, "moved to {}", moved.offset);
+        // Near the scanned flank the far roof edge's image makes it 0.6 wide the other way.
+        assert_eq!(check(0.15).fit, PlaneFit::Proportions);
     }
 
     #[test]

@@ -8,7 +8,7 @@ use burn::tensor::Device;
 use mvpcc::complete::clean::CleanReport;
 use mvpcc::complete::orient::{OrientMode, Orienter};
 use mvpcc::complete::preview::{render, Layer};
-use mvpcc::complete::symmetry::{Plane, PlaneFit};
+use mvpcc::complete::symmetry::{Cues, Plane, PlaneFit};
 use mvpcc::complete::{
     Completer, Completion, Method, Options, Run, Settings, Timings, DEFAULT_MODEL, SYNTHETIC,
 };
@@ -205,6 +205,10 @@ struct PlaneReport {
     normal: [f64; 3],
     support: f64,
     fit: PlaneFit,
+    /// Where each cue put the plane, as `x`.
+    cues: Cues,
+    /// Whether the cues agree well enough for the mirror image to be drawn.
+    vouched: bool,
 }
 
 impl PlaneReport {
@@ -219,6 +223,8 @@ impl PlaneReport {
             normal,
             support: plane.support,
             fit: plane.fit,
+            cues: plane.cues,
+            vouched: plane.vouched,
         }
     }
 }

@@ -1071,6 +1071,47 @@ mod tests {
     }
 
     #[test]
+    fn a_scan_of_both_flanks_gets_no_mirror_image_beyond_them() {
+        // The whole example car (x within ±0.91 m, 4.4 m long), its +x flank seen more sparsely,
+        // with a wing mirror 0.25 m out on the better scanned side (−x) only: its image would
+        // stick out beyond the other flank, where the scanner saw nothing, so it is dropped;
+        // the scan's own points stay.
+        let car = example_car().cloud;
+        let keep: Vec<bool> = car
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| p[0] < 0.3 || i % 3 == 0)
+            .collect();
+        let mut input = car.filter(&keep);
+        let n = input.len();
+        for i in 0..40 {
+            input.positions.push([-1.15, 0.9 + 0.002 * i as f64, 0.8]);
+        }
+        input.colors.as_mut().unwrap().extend([[0u8; 3]; 40]);
+        let done = complete(&input, None, &options(Method::Mirror)).unwrap();
+        let plane = done.plane.unwrap();
+        assert!(
+            plane.both_sides && plane.fit != crate::complete::symmetry::PlaneFit::HeldBack,
+            "{plane:?}"
+        );
+        assert_eq!(&done.cloud.positions[..n + 40], &input.positions[..]);
+        let reach = done.cloud.positions[n + 40..]
+            .iter()
+            .map(|p| p[0])
+            .fold(f64::MIN, f64::max);
+        let flank = input
+            .positions
+            .iter()
+            .map(|p| p[0])
+            .fold(f64::MIN, f64::max);
+        assert!(
+            reach <= flank + SEEN_WIDTH_MARGIN * 4.4 + 1e-9,
+            "an image {reach} m out, the flank at {flank} m"
+        );
+    }
+
+    #[test]
     fn network_output_lands_in_the_input_frame_with_input_points_exact() {
         let input = partial();
         let inpainter = tiny_inpainter();

@@ -175,21 +175,24 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         Some(width) => with_width(points, &seen, &sample, width, found),
         None => found,
     };
-    let slices = if seen.one_sided {
-        seen.slices.clone()
+    // A one-sided cloud's slices are already cut; the others' are cut here, once.
+    let cut;
+    let slices: &[Vec<usize>] = if seen.one_sided {
+        &seen.slices
     } else {
-        horizontal_slices(points, &bounds)
+        cut = horizontal_slices(points, &bounds);
+        &cut
     };
     let cues = Cues {
         pairs: pulled.or(supported.then_some(best)),
         extent: if seen.one_sided {
-            slices_middle(points, &bounds, &slices, seen.side)
+            slices_middle(points, &bounds, slices, seen.side)
         } else {
             Some(bounds.center()[0])
         },
         tyres: between_the_tracks(points, &bounds, seen.side).map(|t| t.middle),
         width: width.and_then(|w| {
-            let flank = scanned_flank(points, &slices, seen.side)?;
+            let flank = scanned_flank(points, slices, seen.side)?;
             Some(seen.side * (flank - w / 2.0))
         }),
     };
@@ -199,7 +202,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         both_sides,
         ..p
     });
-    in_proportion(points, &bounds, &slices, &sample, cues.extent, found)
+    in_proportion(points, &bounds, slices, &sample, cues.extent, found)
 }
 
 /// The widest a road vehicle is for its length, wing mirrors included: cars are 0.38–0.47 of

@@ -691,13 +691,11 @@ fn a_checkpoint_that_cannot_be_written_is_an_error_and_keeps_the_previous_one() 
         .stderr(predicate::str::contains("stopped at step 8"));
 }
 
+#[ignore = "needs ../shared/reference"]
 #[test]
 fn the_reference_bus_trains_without_a_validation_split() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/views");
-    if !root.is_dir() {
-        eprintln!("skipped: ../shared/reference/views is absent");
-        return;
-    }
+    assert!(root.is_dir(), "{} is absent", root.display());
     let dir = tempfile::tempdir().unwrap();
     mvpcc()
         .args([

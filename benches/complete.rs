@@ -1,17 +1,18 @@
-//! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient and
-//! complete with the built-in models, write; and the parts users can switch on or off. A dense scan of
-//! one side (half a million points, as a survey-grade scanner gives a bus) is timed with the
-//! mirror alone: the network's time does not depend on the points, the geometric stages do. With
-//! `MVPCC_BENCH_MODEL=FILE` (a generator's weights, such as a relay leg's) the network method is
-//! timed with that model too, in the same run, so a candidate's cost is compared with the
-//! built-in model's on the same machine state (docs/training.md).
+//! `complete` end to end on a ~35K-point car scan (the speed table of docs/speed.md): read, orient
+//! and complete with the built-in models, write; and the parts users can switch on or off. A dense
+//! scan of one side (half a million points, as a survey-grade scanner gives a bus) is timed with
+//! the mirror alone: the network's time does not depend on the points, the geometric stages do.
+//! With `MVPCC_BENCH_MODEL=FILE` (a generator's weights, such as a relay leg's) the network method
+//! is timed with that model too, in the same run, so a candidate's cost is compared with the
+//! built-in model's on the same machine state (lab/2026-12-04-widening).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::complete::orient::{OrientMode, Orienter};
-use mvpcc::complete::{Completer, Method, Options, Settings};
+use mvpcc::app;
+use mvpcc::app::complete::{FileOptions, Job};
+use mvpcc::complete::orient::OrientMode;
+use mvpcc::complete::{Completer, Method, Options, Settings, Source};
 use mvpcc::datagen::shapes;
-use mvpcc::io::{read_cloud, write_cloud, Encoding};
-use mvpcc::model::inpaint::Inpainter;
+use mvpcc::io::{write_cloud, Encoding};
 use std::path::Path;
 use std::time::Duration;
 
@@ -22,11 +23,9 @@ fn completers() -> Vec<(String, Completer)> {
     let device = burn::tensor::Device::flex();
     let mut all = vec![(String::new(), Completer::builtin(device.clone()).unwrap())];
     if let Some(path) = std::env::var_os("MVPCC_BENCH_MODEL") {
-        let bytes = std::fs::read(&path).unwrap();
-        let inpainter = Inpainter::from_bytes(&bytes, device).unwrap();
-        let orienter = Orienter::builtin().unwrap();
-        let name = format!(", {}", path.to_string_lossy());
-        all.push((name, Completer::new(Some(inpainter), Some(orienter))));
+        let model = Source::File(Path::new(&path));
+        let completer = Completer::load(model, Source::Builtin, device, None).unwrap();
+        all.push((format!(", {}", path.to_string_lossy()), completer));
     }
     all
 }
@@ -94,16 +93,19 @@ fn dense_side(c: &mut Criterion, completer: &Completer) {
     group.finish();
 }
 
-/// What `mvpcc complete IN OUT` does with `options`.
+/// What `mvpcc complete IN OUT` does with `options`: the command's own file step.
 fn complete_file(input: &Path, output: &Path, completer: &Completer, options: &Options) {
-    let cloud = read_cloud(input, None).unwrap().cloud;
-    let settings = Settings {
+    let settings = |_: &Path| Settings {
         clean: false,
         orient: OrientMode::Auto,
         options: options.clone(),
     };
-    let run = completer.run(&cloud, &settings).unwrap();
-    write_cloud(output, &run.completion.cloud, None, Encoding::Binary).unwrap();
+    let job = Job {
+        completer,
+        settings: &settings,
+        files: FileOptions::default(),
+    };
+    app::complete::complete_file(input, output, None, &job).unwrap();
 }
 
 criterion_group!(benches, end_to_end);

@@ -1,5 +1,5 @@
-//! Measures the orientation stage (docs/orientation.md): every partial of a `prepare` test
-//! split is turned by a random yaw, the estimators' heading errors are collected, and the
+//! Measures the orientation stage (docs/pipeline.md, *3. Heading, roll and the network's pose*):
+//! every partial of a `prepare` test split is turned by a random yaw, the estimators' heading errors are collected, and the
 //! completion of the turned partial (`--orient auto`, turned back) is scored like `mvpcc eval
 //! --data` next to the completions of the partial as it is (`--orient none`, the pipeline
 //! before orientation existed, and `--orient auto`). Real scans given with `--mls` are turned by random yaws too, and their completions,
@@ -12,8 +12,8 @@
 
 use burn::tensor::Device;
 use mvpcc::complete::clean::clean;
-use mvpcc::complete::orient::{angle_between, orient, OrientMode, Orienter, DEFAULT_ORIENTER};
-use mvpcc::complete::{Completer, Options, Settings, DEFAULT_MODEL};
+use mvpcc::complete::orient::{angle_between, orient, OrientMode, Orienter};
+use mvpcc::complete::{Completer, Options, Settings, Source};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::core::rng::Lcg;
@@ -21,7 +21,6 @@ use mvpcc::datagen::data::{Layout, Manifest, ModelEntry, SampleEntry, TEST};
 use mvpcc::datagen::scan::PartialSpec;
 use mvpcc::io::read_cloud;
 use mvpcc::metrics::compare_clouds;
-use mvpcc::model::inpaint::Inpainter;
 use mvpcc::train::orient::OrientScores;
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -396,18 +395,12 @@ fn kept_of(scan: &PointCloud, cleaned: &PointCloud) -> usize {
 
 /// The built-in models, or the files `--model` and `--orienter` name.
 fn load_completer() -> Result<Completer, Error> {
-    let orienter_bytes = match arg("--orienter") {
-        Some(p) => std::fs::read(p)?,
-        None => DEFAULT_ORIENTER.to_vec(),
-    };
-    let model_bytes = match arg("--model") {
-        Some(p) => std::fs::read(p)?,
-        None => DEFAULT_MODEL.to_vec(),
-    };
-    Ok(Completer::new(
-        Some(Inpainter::from_bytes(&model_bytes, Device::flex())?),
-        Some(Orienter::from_bytes(&orienter_bytes, Device::flex())?),
-    ))
+    let (model, orienter) = (arg("--model"), arg("--orienter"));
+    fn source(path: &Option<String>) -> Source<'_> {
+        path.as_ref().map_or(Source::Builtin, |p| Source::File(Path::new(p)))
+    }
+    let completer = Completer::load(source(&model), source(&orienter), Device::flex(), None)?;
+    Ok(completer)
 }
 
 fn pcd_files(dir: &str) -> Result<Vec<PathBuf>, Error> {

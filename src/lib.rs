@@ -15,7 +15,10 @@
 //! - [`datagen`]: training data from meshes or procedural vehicles: reading meshes,
 //!   rasterizing, ground truth and partial scans, the dataset layout.
 //! - [`train`]: training the GAN and the orientation network.
+//! - [`app`]: what each command does, without parsing or printing: batch completion, scoring,
+//!   reports exported as tables or JSON.
 
+pub mod app;
 pub mod complete;
 pub mod core;
 pub mod datagen;

@@ -3,6 +3,7 @@
 
 use clap::builder::RangedU64ValueParser;
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
+use mvpcc::app::eval::{GroundTruth, Metric, Normalize};
 use mvpcc::complete::filter::{SorParams, MAX_K};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::orient::OrienterConfig;
@@ -156,30 +157,6 @@ impl SorOptions {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Metric {
-    /// Chamfer distances: cd_l2_half (the paper's Eq. 5, squared), cd_l1 (PCN; the scale the
-    /// paper's tables print, docs/paper.md), cd_l2 (PoinTr).
-    Cd,
-    /// Precision, recall and F1 at each --tau.
-    F1,
-    /// PSNR of view colours (needs --pred-views/--gt-views).
-    Psnr,
-    /// SSIM of view colours.
-    Ssim,
-    /// Mean absolute error of view colours.
-    Mae,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Normalize {
-    /// Coordinates as stored.
-    None,
-    /// Both clouds mapped by the ground truth's box: centred, longest side 1.
-    GtBox,
-}
-
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// Metrics to compute.
@@ -231,14 +208,6 @@ pub struct EvalArgs {
 
 /// The decoded-sample cache of `train` and `train-orient`, MiB.
 const DEFAULT_CACHE_MB: usize = 2048;
-
-/// Which ground truth `eval --data` scores against.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum GroundTruth {
-    Fine,
-    Coarse,
-}
 
 /// A list of rig cameras as typed on the command line (`5,6,7,8`).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -318,11 +287,11 @@ pub struct CompleteArgs {
     /// Input's up axis [default: z for LAS/LAZ, y otherwise].
     #[arg(long, value_enum)]
     pub up: Option<UpAxis>,
-    /// Which way the vehicle faces: auto (the best measured estimator, see docs/orientation.md), geometric
-    /// (footprint rectangle + height heuristic), learned (the orientation network), combined
-    /// (rectangle axis, network's front), none (keep the input's axes), or the heading in
-    /// degrees (the front's direction, counter-clockwise from +x seen from above).
-    /// [default: auto; none with --paper]
+    /// Which way the vehicle faces: auto (the best measured estimator, see docs/pipeline.md, *3.
+    /// Heading, roll and the network's pose*), geometric (footprint rectangle + height heuristic),
+    /// learned (the orientation network), combined (rectangle axis, network's front), none (keep
+    /// the input's axes), or the heading in degrees (the front's direction, counter-clockwise from
+    /// +x seen from above). [default: auto; none with --paper]
     #[arg(long, allow_negative_numbers = true)]
     pub orient: Option<OrientMode>,
     /// How far the vehicle leans across its width (a cambered road, a kerb), degrees about its
@@ -708,12 +677,13 @@ pub struct TrainArgs {
     /// input images, before the shared encoder; the paper's Table 6) [default: the config's].
     #[arg(long, value_enum)]
     pub fusion: Option<Fusion>,
-    /// Keep the input's pixels: the generator's output is the input wherever the input has a
-    /// pixel, so it learns only the pixels it completes (docs/network.md) [default: the config's]
+    /// Keep the input's pixels: the generator's output is the input wherever the input has a pixel,
+    /// so it learns only the pixels it completes (docs/pipeline.md, *6. The network*) [default: the
+    /// config's]
     #[arg(long)]
     pub input_copy: bool,
-    /// The occupancy threshold saved with the weights, which `complete` uses unless told
-    /// otherwise: chosen on the validation split (docs/training.md). `--init W --steps 0`
+    /// The occupancy threshold saved with the weights, which `complete` uses unless told otherwise:
+    /// chosen on the validation split (lab/2026-12-02-occupancy-threshold). `--init W --steps 0`
     /// writes W's weights with it [default: the config's]
     #[arg(long, value_name = "P")]
     pub occupancy: Option<f64>,
@@ -727,9 +697,10 @@ pub struct TrainArgs {
     /// The discriminator's weights to start from with --init, over the one --init finds.
     #[arg(long, requires = "init")]
     pub init_discriminator: Option<PathBuf>,
-    /// Widen --init's generator to this width: its channels keep their weights and the new
-    /// ones start without effect, so the run starts from its output (docs/training.md). The
-    /// discriminator starts fresh unless --init-discriminator names one for the new width.
+    /// Widen --init's generator to this width: its channels keep their weights and the new ones
+    /// start without effect, so the run starts from its output (docs/training.md, *Starting from
+    /// trained weights*). The discriminator starts fresh unless --init-discriminator names one for
+    /// the new width.
     #[arg(long, requires = "init", conflicts_with = "config")]
     pub widen: Option<usize>,
     /// Where training runs (GPUs: docs/gpu.md).

@@ -27,14 +27,16 @@ use crate::core::camera::CameraError;
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
 use crate::core::knn::{KnnIndex, MatchGrid};
+use crate::io::{read_bytes, Problem};
 use crate::model::inpaint::{InpaintError, Inpainter};
-use crate::model::weights::{read_config, Network, WeightsError};
-use crate::model::ModelConfig;
+use crate::model::weights::{generator_in, read_config, Network, NoGenerator, WeightsError};
+use crate::model::{ConfigError, ModelConfig};
 use crate::views::projection::ViewImages;
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
 use serde::Serialize;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -104,8 +106,9 @@ pub struct Options {
     /// Which way the input's front faces (see [`crate::core::frame`]); `None` keeps the input's
     /// axes, turning only its longer horizontal side onto the length.
     pub heading: Option<f64>,
-    /// How far the vehicle leans across its width; upright as read unless asked, since on
-    /// upright vehicles a roll found costs a little (docs/completing.md, *Leaning vehicles*).
+    /// How far the vehicle leans across its width; upright as read unless asked, since on upright
+    /// vehicles a roll found costs a little (docs/pipeline.md, *3. Heading, roll and the network's
+    /// pose*).
     pub roll: Roll,
     /// Rig cameras the model's views come from.
     pub views: Vec<usize>,
@@ -127,7 +130,7 @@ pub struct Options {
     /// A completed point nearer than this to a measured or mirrored point (and beyond
     /// `merge_distance`) is added only where the network is sure of it, its occupancy above
     /// `near_occupancy`: next to what was measured a wrong point costs precision and fills
-    /// little (docs/completing.md, *Sure near the surface*). In the network's unit box; at or
+    /// little (docs/pipeline.md, *7. Merge*). In the network's unit box; at or
     /// below `merge_distance` every completed point passes the model's threshold alone.
     pub near_distance: f64,
     /// The occupancy (a probability) a completed point within `near_distance` needs.
@@ -143,8 +146,8 @@ pub struct Options {
     /// does).
     pub symmetry: bool,
     /// Also let the network complete the measured points' mirror image and keep what it makes
-    /// of it, mirrored back, beside its first output (needs a plane; docs/completing.md, *The
-    /// mirrored pass*).
+    /// of it, mirrored back, beside its first output (needs a plane; docs/pipeline.md,
+    /// *6. The network*).
     pub mirror_pass: bool,
     /// Fit the network's box to the measured points and their mirror images, centred on the
     /// symmetry plane as the training objects are; otherwise the measured points' own box.
@@ -218,6 +221,42 @@ pub enum CompleteError {
     Views { model: usize, given: usize },
     #[error("the network method needs a model")]
     NoModel,
+}
+
+/// Where one of a [`Completer`]'s networks comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum Source<'a> {
+    /// None: the settings never run it.
+    Unused,
+    /// The one built into the binary.
+    Builtin,
+    /// A weights file; for the generator also a run directory or `assets/` holding one.
+    File(&'a Path),
+}
+
+/// Why a network could not be loaded.
+#[derive(Debug, Error)]
+pub enum LoadError {
+    #[error("{}: {source}", path.display())]
+    Read { path: PathBuf, source: Problem },
+    #[error(transparent)]
+    NoGenerator(#[from] NoGenerator),
+    #[error("{}: {source}", path.display())]
+    Weights { path: PathBuf, source: WeightsError },
+    #[error("the built-in {what}: {source}")]
+    Builtin {
+        what: &'static str,
+        source: WeightsError,
+    },
+    #[error(transparent)]
+    Occupancy(#[from] ConfigError),
+}
+
+fn read_weights(path: &Path) -> Result<Vec<u8>, LoadError> {
+    read_bytes(path).map_err(|source| LoadError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Wall time of each stage (the paper's Table 4 rows, and ours). Reading and writing are
@@ -330,6 +369,57 @@ impl Completer {
             inpainter,
             orienter,
         }
+    }
+
+    /// The networks `generator` and `orienter` name, the generator on `device` (with its
+    /// occupancy threshold replaced by `occupancy`, when given); the orientation network is
+    /// small and runs on the CPU.
+    pub fn load(
+        generator: Source,
+        orienter: Source,
+        device: Device,
+        occupancy: Option<f64>,
+    ) -> Result<Completer, LoadError> {
+        let inpainter = match generator {
+            Source::Unused => None,
+            Source::Builtin => Some(Inpainter::from_bytes(DEFAULT_MODEL, device).map_err(
+                |source| LoadError::Builtin {
+                    what: "model",
+                    source,
+                },
+            )?),
+            Source::File(path) => {
+                let file = if path.is_dir() {
+                    generator_in(path)?
+                } else {
+                    path.to_path_buf()
+                };
+                let bytes = read_weights(&file)?;
+                let inpainter = Inpainter::from_bytes(&bytes, device)
+                    .map_err(|source| LoadError::Weights { path: file, source })?;
+                Some(inpainter)
+            }
+        };
+        let inpainter = match (inpainter, occupancy) {
+            (Some(i), Some(p)) => Some(i.with_occupancy(p)?),
+            (i, _) => i,
+        };
+        let orienter = match orienter {
+            Source::Unused => None,
+            Source::Builtin => Some(Orienter::builtin().map_err(|source| LoadError::Builtin {
+                what: "orientation network",
+                source,
+            })?),
+            Source::File(path) => {
+                let bytes = read_weights(path)?;
+                let orienter = Orienter::from_bytes(&bytes, Device::flex());
+                Some(orienter.map_err(|source| LoadError::Weights {
+                    path: path.to_path_buf(),
+                    source,
+                })?)
+            }
+        };
+        Ok(Completer::new(inpainter, orienter))
     }
 
     /// The built-in generator on `device` and the built-in orientation network.
@@ -640,7 +730,7 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
 /// Mirror images of the measured points across `plane`, where no measured point lies within
 /// the plane's tolerance. Asked of a grid, not the k-d tree: most images of a one-sided scan
 /// land far from every measured point, where each tree query walks far (on a 500K-point bus,
-/// 1.2 s of the 2.1 s `complete` took; docs/speed.md).
+/// 1.2 s of the 2.1 s `complete` took; lab/2026-12-04-complete-bench-history).
 fn mirror_images(measured: &[[f64; 3]], plane: Plane) -> Vec<Added> {
     let grid = MatchGrid::new(measured, plane.tolerance);
     measured

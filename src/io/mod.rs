@@ -13,6 +13,7 @@ mod unfinished;
 mod xyz;
 
 use crate::core::cloud::PointCloud;
+use crate::core::frame::UpAxis;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -34,6 +35,17 @@ pub enum Format {
 }
 
 impl Format {
+    /// The extension outputs in this format are given.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Ply => "ply",
+            Format::Pcd => "pcd",
+            Format::Las => "las",
+            Format::Laz => "laz",
+            Format::Xyz => "xyz",
+        }
+    }
+
     /// The format an extension names (case-insensitive); `.txt` and `.csv` are XYZ text.
     pub fn from_path(path: &Path) -> Result<Format, Problem> {
         let ext = path
@@ -215,6 +227,23 @@ pub struct Loaded {
     /// Points with NaN or infinite coordinates, dropped (organized PCD files use NaN for
     /// "no return", so these are common and not an error).
     pub non_finite_dropped: usize,
+}
+
+/// What reading dropped, when it dropped points with NaN or infinite coordinates.
+pub fn non_finite_warning(dropped: usize) -> Option<String> {
+    (dropped > 0).then(|| {
+        let s = if dropped == 1 { "" } else { "s" };
+        format!("dropped {dropped} point{s} with NaN or infinite coordinates")
+    })
+}
+
+/// The up axis of a file that does not say: MLS formats (LAS/LAZ) are z-up, the dataset's own
+/// formats y-up.
+pub fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
+    match Format::of_input(input, format).ok() {
+        Some(Format::Las | Format::Laz) => UpAxis::Z,
+        _ => UpAxis::Y,
+    }
 }
 
 /// A whole file's bytes (weights), a missing file said in the words the cloud readers use.

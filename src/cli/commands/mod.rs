@@ -15,9 +15,10 @@ use crate::cli::args::{Cli, Command};
 use crate::cli::streams::tell;
 use anyhow::{bail, Context};
 use clap::ValueEnum;
+use mvpcc::app::Progress;
 use mvpcc::complete::builtin_shape;
 use mvpcc::core::cloud::PointCloud;
-use mvpcc::io::{read_cloud, Format};
+use mvpcc::io::{non_finite_warning, read_cloud, Format};
 use mvpcc::model::device::{open, DeviceChoice, Opened};
 use mvpcc::model::{ModelConfig, Preset};
 use std::fmt::Display;
@@ -46,10 +47,7 @@ fn model_shape(name: &str) -> anyhow::Result<ModelConfig> {
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     crate::cli::interrupt::install().context("cannot install the signal handler")?;
-    let log = Log {
-        quiet: cli.quiet,
-        silent: false,
-    };
+    let log = Log { quiet: cli.quiet };
     match cli.command {
         Command::Complete(args) => complete::run(args, log),
         Command::Eval(args) => eval::run(args, log),
@@ -68,18 +66,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 #[derive(Debug, Clone, Copy)]
 pub struct Log {
     quiet: bool,
-    /// Not even warnings: for work whose caller reports them itself.
-    silent: bool,
 }
 
 impl Log {
-    pub fn silent() -> Log {
-        Log {
-            quiet: true,
-            silent: true,
-        }
-    }
-
     pub fn info(&self, message: impl Display) {
         if !self.quiet {
             tell(message);
@@ -87,9 +76,7 @@ impl Log {
     }
 
     pub fn warn(&self, message: impl Display) {
-        if !self.silent {
-            tell(format_args!("warning: {message}"));
-        }
+        tell(format_args!("warning: {message}"));
     }
 
     pub fn quiet(&self) -> bool {
@@ -113,14 +100,6 @@ pub(crate) fn load(path: &Path, format: Option<Format>, log: Log) -> anyhow::Res
         log.warn(format!("{}: {warning}", path.display()));
     }
     Ok(loaded.cloud)
-}
-
-/// What reading dropped, when it dropped points with NaN or infinite coordinates.
-pub(crate) fn non_finite_warning(dropped: usize) -> Option<String> {
-    (dropped > 0).then(|| {
-        let points = crate::cli::count(dropped, "point");
-        format!("dropped {points} with NaN or infinite coordinates")
-    })
 }
 
 /// A training loop's progress bar over `steps` (0 until the loop knows them) on stderr, with
@@ -154,6 +133,41 @@ pub(crate) fn progress(len: usize, label: &str, log: Log) -> indicatif::Progress
         .expect("a valid progress template"),
     );
     bar
+}
+
+/// A progress bar on stderr for the library's long services, made when they say how many
+/// items there are; hidden under `--quiet` or for a single item.
+pub(crate) struct Bar {
+    log: Log,
+    bar: std::sync::OnceLock<indicatif::ProgressBar>,
+}
+
+impl Bar {
+    pub(crate) fn new(log: Log) -> Bar {
+        Bar {
+            log,
+            bar: std::sync::OnceLock::new(),
+        }
+    }
+}
+
+impl Progress for Bar {
+    fn start(&self, total: usize, label: &str) {
+        let _already = self.bar.set(progress(total, label, self.log));
+    }
+
+    fn done(&self, item: &str) {
+        if let Some(bar) = self.bar.get() {
+            bar.set_message(item.to_string());
+            bar.inc(1);
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = self.bar.get() {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 /// Refuses an output folder whose name a file already holds, before any work is done.

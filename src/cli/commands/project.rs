@@ -3,19 +3,10 @@ use crate::cli::args::ProjectArgs;
 use crate::cli::count;
 use anyhow::Context;
 use mvpcc::core::camera::{Camera, CameraError};
-use mvpcc::core::frame::{Frame, UpAxis};
-use mvpcc::io::Format;
+use mvpcc::core::frame::Frame;
+use mvpcc::io::default_up;
 use mvpcc::views::projection::project;
 use mvpcc::views::{write_views, ViewsInfo};
-use std::path::Path;
-
-/// MLS formats are z-up; the dataset's own formats are y-up.
-pub(super) fn default_up(input: &Path, format: Option<Format>) -> UpAxis {
-    match Format::of_input(input, format).ok() {
-        Some(Format::Las | Format::Laz) => UpAxis::Z,
-        _ => UpAxis::Y,
-    }
-}
 
 pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = Camera::set(&args.views.0, args.size).map_err(|e| match e {

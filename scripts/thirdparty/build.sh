@@ -2,17 +2,21 @@
 # Rebuild the third-party vehicle meshes listed in sources.tsv into OUT_DIR/<category>/<name>.glb
 # and check each against the sha256 recorded in the TSV (exit 1 on any mismatch).
 #
-#   build.sh OUT_DIR
+#   build.sh OUT_DIR [TSV]
+#
+# TSV is sources.tsv (the validation set) by default; train-sources.tsv lists the disjoint
+# training meshes.
 #
 # Sources come from ${THIRDPARTY_GIT:-https://github.com}/<owner>/<repo> at the listed commit
 # (shallow, blob-less fetch: only the files needed are downloaded). For an offline rebuild set
 # THIRDPARTY_MIRROR=DIR to read $DIR/<owner>+<repo>/repo as local (bare) git dirs instead.
-# Column `how` says what makes each file (see glb.py): obj | gltf | compose | copy.
+# Column `how` says what makes each file (see glb.py): obj | gltf | compose | copy, and fbx
+# (binary FBX, fbx2glb.py).
 set -euo pipefail
 
-out=${1:?usage: build.sh OUT_DIR}
+out=${1:?usage: build.sh OUT_DIR [TSV]}
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
-tsv=$here/sources.tsv
+tsv=${2:-$here/sources.tsv}
 glb() { python3 "$here/glb.py" "$@"; }
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -23,6 +27,7 @@ gitdir() {
   local repo=$1 commit=$2 d
   if [[ -n ${THIRDPARTY_MIRROR:-} ]]; then
     d=$THIRDPARTY_MIRROR/${repo/\//+}/repo
+    [[ -d $d/.git ]] && d=$d/.git
   else
     d=$work/git/${repo/\//+}
     if [[ ! -d $d ]]; then
@@ -60,6 +65,7 @@ while IFS=$'\t' read -r -u 3 file repo path commit how sha; do
     obj | gltf) glb "$how" "$f" "$dst" ;;
     compose) glb compose "$f" "$dst" "$here/placements.json" "$name" ;;
     copy) cp "$f" "$dst" ;;
+    fbx) python3 "$here/fbx2glb.py" "$f" "$dst" ;;
     *) echo "$name: unknown how '$how'" >&2; exit 1 ;;
   esac
   printf '%s  %s\n' "$sha" "$file" >>"$work/SHA256SUMS"
@@ -71,4 +77,4 @@ if ! (cd "$out" && sha256sum --quiet -c "$work/SHA256SUMS"); then
   echo "ERROR: rebuilt meshes differ from the recorded sha256 (see FAILED lines above)" >&2
   exit 1
 fi
-echo "OK: all $n meshes rebuilt byte-identical to sources.tsv sha256"
+echo "OK: all $n meshes rebuilt byte-identical to $(basename "$tsv") sha256"

@@ -1,4 +1,4 @@
-//! Measures the symmetry plane (docs/completing.md, *How well the plane is placed*): every test
+//! Measures the symmetry plane (docs/pipeline.md, *4. The symmetry plane*): every test
 //! partial of a `prepare` data directory is completed with `--method mirror` (everything
 //! estimated, as `mvpcc complete --method mirror` does), the estimated plane is compared with
 //! the true one (the generated objects are symmetric about x = 0 of their own frame), and the
@@ -21,8 +21,8 @@
 //! [--limit N] [--json FILE]` or `-- --mls DIR [--seed N] [--turns N] [--json FILE]`
 //!
 //! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset;
-//! small gains are checked on three more seeds, docs/completing.md); the test split is measured
-//! once, for the report.
+//! small gains are checked on three more seeds, docs/quality.md, *The splits*); the test split is
+//! measured once, for the report.
 
 use burn::tensor::Device;
 use mvpcc::complete::orient::OrientMode;

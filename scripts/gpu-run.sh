@@ -23,7 +23,7 @@
 #   --batch B         objects per step [16]
 #   --lr R            first-stage learning rate [5e-4]
 #   --losses gan|l1   the training losses: gan, train's defaults; l1, without the adversarial,
-#                     perceptual and style terms (the CPU legs 8-9 of docs/training.md found
+#                     perceptual and style terms (CPU legs 8-9, lab/2026-12-01-training-legs, found
 #                     they cost CD; leg 12, the built-in model, trained so) [l1]
 #   --loss-depth W    weight of train's depth term (train --loss-depth; leg 12 trained with
 #                     100) [100]

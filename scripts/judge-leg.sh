@@ -2,8 +2,8 @@
 # Judges a training relay leg on the validation split: the leg's generator against the built-in
 # one, the network alone (`--no-keep-input --no-symmetry`) and the whole `complete` pipeline,
 # each scored by `mvpcc eval --tau 0.01`. A leg replaces the built-in model only if it is better
-# in both (docs/training.md). `--method mirror` is scored too: issue #20 asks the pipeline to beat
-# it in every category × protocol cell (the `cell` rows). Never run on the test split: choices
+# in both (docs/training.md, *The relay*). `--method mirror` is scored too: issue #20 asks the
+# pipeline to beat it in every category × protocol cell (the `cell` rows). Never run on the test split: choices
 # are made here.
 #
 #   scripts/judge-leg.sh [--seeds 8,9,10,11] MODEL [COMPLETE_OPTION...]
@@ -11,7 +11,7 @@
 # MODEL: a generator file or a run directory. COMPLETE_OPTIONs go to the leg's completions
 # only, to judge it with another threshold or merge distance (`--occupancy 0.02`). --seeds:
 # the validation splits, 8 by default; a gain under about 0.005 on seed 8 is checked on 9-11
-# too (docs/completing.md). Each split (150 generated objects, two partials each, clouds only)
+# too (docs/quality.md). Each split (150 generated objects, two partials each, clouds only)
 # is made once into target/valset (seed 8) or target/valsetN; results go to
 # target/judge/seedN/<mode>-<who>/. MVPCC names the binary [target/release/mvpcc].
 #

@@ -26,7 +26,7 @@ const SPACING_NEIGHBOUR: usize = 4;
 const ISOLATED: f64 = 6.0;
 /// Points join one object when within this multiple of the median spacing, or this share of
 /// the longest side, whichever is larger. 12 is the middle of the reach a plain voxel grid of 8
-/// had (docs/orientation.md, *Cleaning segmented scans*): 8 parted sparse cars.
+/// had (lab/2026-12-06-clean-clutter): 8 parted sparse cars.
 const LINK_SPACINGS: f64 = 12.0;
 const LINK_SHARE: f64 = 0.02;
 /// Another component is kept when it has this share of the largest one's points.

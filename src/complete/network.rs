@@ -29,10 +29,10 @@ pub(super) struct NetworkOutput {
 /// (which needs the symmetry `plane` for its width), timed. With a plane and
 /// [`Options::mirror_pass`] the network then completes the measured points' mirror image too,
 /// and its points, mirrored back, join the first pass's: a second opinion from views that see
-/// the other flank (docs/completing.md, *The mirrored pass*). The two passes are one rayon
+/// the other flank (docs/pipeline.md, *6. The network*). The two passes are one rayon
 /// join, as the CPU backend's matrix products are rayon tasks: on idle cores the passes run
 /// side by side and their products spread over the rest, while in a batch whose jobs fill the
-/// cores nothing waits on a thread of its own (docs/speed.md, *Threads*).
+/// cores nothing waits on a thread of its own (docs/speed.md).
 pub(super) fn run_network(
     input: &PointCloud,
     measured: &[[f64; 3]],
@@ -219,10 +219,10 @@ impl Network<'_> {
     }
 }
 
-/// Drops the network's points lying more than `margin` beyond the measured points' height or
-/// beyond the width they and their mirror images span, and returns how many went (docs/
-/// completing.md, *The network's box*). The length is left open: a partial may lack a whole end, which
-/// the network fills. Without a plane the width is not known either.
+/// Drops the network's points lying more than `margin` beyond the measured points' height or beyond
+/// the width they and their mirror images span, and returns how many went (docs/ completing.md,
+/// *The network's box*). The length is left open: a partial may lack a whole end, which the network
+/// fills. Without a plane the width is not known either.
 fn drop_outside_box(
     predicted: &mut PointCloud,
     measured: &[[f64; 3]],

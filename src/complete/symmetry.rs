@@ -22,7 +22,7 @@ const MIN_LEVER: f64 = 0.03;
 /// ... nor, in [`find_plane`], within this share of the cloud's width: a train is 0.07 of its
 /// length wide, so 0.03 left only its flank and roof edges to vote and 4 of the 40 validation
 /// train partials had no plane. Chosen on the validation split among 0.1, 0.2, 0.25, 0.3, 0.4
-/// and none (docs/completing.md).
+/// and none (lab/2026-12-02-plane-heading-cues).
 const LEVER_OF_WIDTH: f64 = 0.3;
 /// A mirrored point counts as matched within this distance of a measured one, or within 1.5
 /// point spacings of a sparser cloud.
@@ -34,11 +34,11 @@ const MIN_SCORE: f64 = 0.05;
 const ICP_ROUNDS: usize = 20;
 /// Neighbours a point's normal is fitted to.
 const NORMAL_NEIGHBOURS: usize = 12;
-/// A point whose neighbours' centroid lies more than this many RMS neighbour distances from it
-/// is on the edge of what was seen. Mirror pairs ending there are where the overlap of a
-/// one-sided scan with its mirror image ends, and they pull the plane towards whatever
-/// overlap it already has, so the ICP leaves them out (as mesh zippering leaves out boundary
-/// pairs). Chosen on the validation split among 0.3, 0.4, 0.5, 0.8 and none (docs/completing.md).
+/// A point whose neighbours' centroid lies more than this many RMS neighbour distances from it is
+/// on the edge of what was seen. Mirror pairs ending there are where the overlap of a one-sided
+/// scan with its mirror image ends, and they pull the plane towards whatever overlap it already
+/// has, so the ICP leaves them out (as mesh zippering leaves out boundary pairs). Chosen on the
+/// validation split among 0.3, 0.4, 0.5, 0.8 and none (lab/2026-12-01-plane-pairs-slices).
 const EDGE_OFFSET: f64 = 0.4;
 
 /// The symmetry plane found, and how much of the cloud supports it.
@@ -136,11 +136,11 @@ pub enum PlaneFit {
 ///    and not their treads' inner edges, and the gap's middle then leans towards the scanned
 ///    side.
 ///
-/// On the validation split (docs/completing.md) the pairs took the mirror's F1@0.01 from 0.673
-/// to 0.699, most of it on the 27 % of partials that had no plane before. Given the vehicle's
-/// `width` (normalized units), a scan of one side has its plane kept at least half of it from
-/// the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show any
-/// symmetry (for example, one flat side) and no width places a plane.
+/// On the validation split (lab/2026-12-01-plane-pairs-slices) the pairs took the mirror's F1@0.01
+/// from 0.673 to 0.699, most of it on the 27 % of partials that had no plane before. Given the
+/// vehicle's `width` (normalized units), a scan of one side has its plane kept at least half of it
+/// from the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show
+/// any symmetry (for example, one flat side) and no width places a plane.
 pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
     let across = bounds.max[0] - bounds.min[0];
@@ -291,7 +291,7 @@ const SLICE_SPAN: f64 = 0.5;
 
 /// How near a measured point the mirror image of a slice's far extreme must land (see
 /// [`paired`]). Chosen on the validation split among 0.01, 0.02, 0.025, 0.03, 0.035, 0.04,
-/// 0.05 and none (docs/completing.md).
+/// 0.05 and none (lab/2026-12-01-plane-pairs-slices).
 const PAIRED: f64 = 0.035;
 
 /// Two x values of a slice closer than this are one return position of the scan lines, apart
@@ -302,14 +302,14 @@ const DISTINCT: f64 = 0.002;
 const MAX_SPACING: f64 = 0.015;
 /// Where the far edge is taken to lie beyond the far extreme, in return spacings: the last
 /// return falls anywhere within one spacing short of the edge, so half a spacing on average.
-/// With [`MAX_SPACING`], chosen on the validation split (docs/completing.md).
+/// With [`MAX_SPACING`], chosen on the validation split (lab/2026-12-01-plane-pairs-slices).
 const FAR_EDGE: f64 = 0.5;
 
 /// The slices bound the plane only when at least this share of the points lies on the better
 /// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
-/// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and
-/// one such slice moved planes found to within 0.01 % by several percent. Chosen on the
-/// validation split among 0, 0.6, 0.65, 0.7, 0.75, 0.8 and 0.85 (docs/completing.md).
+/// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and one
+/// such slice moved planes found to within 0.01 % by several percent. Chosen on the validation
+/// split among 0, 0.6, 0.65, 0.7, 0.75, 0.8 and 0.85 (lab/2026-12-01-plane-pairs-slices).
 const ONE_SIDED: f64 = 0.75;
 
 /// The tightest bound on the plane from `scanned_side` (±1): the middle of each horizontal
@@ -423,7 +423,7 @@ impl Seen {
 /// Points a tyre track needs in [`between_the_tracks`]: a side view at the vehicle's height
 /// sees the far tyres' inner faces through the gap under the body, often only a few points of
 /// them in the ground band. Chosen on the validation splits among 2, 3, 5 and 10
-/// (docs/completing.md).
+/// (lab/2026-12-06-plane-tyres).
 const TRACK_POINTS: usize = 3;
 /// The gap between the two tracks spans at least this share of the cloud's width ...
 const TRACK_GAP: f64 = 0.5;
@@ -431,14 +431,14 @@ const TRACK_GAP: f64 = 0.5;
 /// buses) to about 0.28 (cars) of their length apart, a train's wheels 0.05–0.07 under its body,
 /// where they show their outer faces and not their treads, so their gap's middle lies beyond
 /// the plane (a validation train went from 0.06 % to 0.49 % of its length off;
-/// docs/completing.md).
+/// lab/2026-12-06-plane-tyres).
 const TRACK_APART: f64 = 0.08;
 
 /// A near track at least this wide across (share of the length) shows its tyres' treads edge
 /// to edge, as a camera beside the vehicle at its height sees them, and then the gap's middle
 /// also overrules a plane the pairs alone placed beyond it, away from the scanned side; from
 /// above, a scanner sees the near tyres' side walls and not their treads' inner edges. Chosen
-/// on the validation splits among 0.01, 0.015, 0.02, 0.025 and 0.03 (docs/completing.md).
+/// on the validation splits among 0.01, 0.015, 0.02, 0.025 and 0.03 (lab/2026-12-06-plane-tyres).
 const TREADS_SEEN: f64 = 0.02;
 
 /// Two tyre tracks in a cloud's ground points (see [`between_the_tracks`]).
@@ -450,13 +450,12 @@ struct Tracks {
     near_width: f64,
 }
 
-/// The middle of the gap between the near and the far tyres, where the ground points (the
-/// lowest [`GROUND`] of the height) fall into two tracks across the width. Seen from beside the
-/// vehicle at its height, the near tyres show their treads edge to edge and the far ones their
-/// inner faces under the body, so the gap's two sides are mirror twins, while nothing else of
-/// the far side may be in view (camera partials: docs/completing.md). `bounds` is the points'
-/// box, `points` in [`find_plane`]'s frame (unit length), `scanned_side` (±1) the side the near
-/// track is on.
+/// The middle of the gap between the near and the far tyres, where the ground points (the lowest
+/// [`GROUND`] of the height) fall into two tracks across the width. Seen from beside the vehicle at
+/// its height, the near tyres show their treads edge to edge and the far ones their inner faces
+/// under the body, so the gap's two sides are mirror twins, while nothing else of the far side may
+/// be in view (camera partials: lab/2026-12-06-plane-tyres). `bounds` is the points' box, `points`
+/// in [`find_plane`]'s frame (unit length), `scanned_side` (±1) the side the near track is on.
 fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<Tracks> {
     let ground = at_height(points, GROUND);
     let mut low: Vec<f64> = points
@@ -486,20 +485,20 @@ fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> 
 /// [`with_width`] trusts the scanned flank to be seen at its widest only where it lies at least
 /// this share of the half-width from the plane found: a motorcycle seen without its near
 /// handlebar had its plane moved by 10 % of its length. Chosen on two validation splits among
-/// 0, 0.8 and 0.9 (docs/completing.md).
+/// 0, 0.8 and 0.9 (lab/2026-12-03-plane-known-width).
 const FLANK_SEEN: f64 = 0.8;
 
-/// The plane of a scan seen from one side (`ONE_SIDED`, as for the slices' bound) whose
-/// vehicle is `width` wide (normalized units): no nearer the scanned flank than half the width,
-/// so the mirrored far flank lies at least as far out as the vehicle's width puts it, unless
-/// the flank lies under `FLANK_SEEN` of that from the plane (its widest part is then not seen);
-/// where no plane was found, half the width from that flank. The flank is the outermost point
-/// of the scanned side over the horizontal slices of `SLICE_POINTS` points or more. The width
-/// bounds the plane only on that side: where the heading is off by a fraction of a degree, the
-/// ends of a long vehicle stick out past its flank, and setting every plane at half the width
-/// from that outermost point moved good planes by 0.6 % of the length (validation split,
-/// docs/completing.md). Clouds seen from both sides keep `plane` as found. `seen` is how the
-/// points were seen, `sample` [`find_plane`]'s.
+/// The plane of a scan seen from one side (`ONE_SIDED`, as for the slices' bound) whose vehicle is
+/// `width` wide (normalized units): no nearer the scanned flank than half the width, so the
+/// mirrored far flank lies at least as far out as the vehicle's width puts it, unless the flank
+/// lies under `FLANK_SEEN` of that from the plane (its widest part is then not seen); where no
+/// plane was found, half the width from that flank. The flank is the outermost point of the scanned
+/// side over the horizontal slices of `SLICE_POINTS` points or more. The width bounds the plane
+/// only on that side: where the heading is off by a fraction of a degree, the ends of a long
+/// vehicle stick out past its flank, and setting every plane at half the width from that outermost
+/// point moved good planes by 0.6 % of the length (validation split,
+/// lab/2026-12-03-plane-known-width). Clouds seen from both sides keep `plane` as found. `seen` is
+/// how the points were seen, `sample` [`find_plane`]'s.
 fn with_width(
     points: &[[f64; 3]],
     seen: &Seen,
@@ -552,10 +551,10 @@ const REFINE_SAMPLE: usize = 2000;
 /// Most a heading is turned by [`refine_heading`], degrees.
 const MAX_TURN: f64 = 8.0;
 
-/// Turns `heading` (degrees counter-clockwise from +x seen from above, see [`mod@crate::complete::orient`])
-/// by at most ±8° so that the vertical plane along it is the cloud's plane of symmetry.
-/// `points` are upright (+y up), in any unit. `None` when the cloud shows no symmetry near that
-/// heading.
+/// Turns `heading` (degrees counter-clockwise from +x seen from above, see
+/// [`mod@crate::complete::orient`]) by at most ±8° so that the vertical plane along it is the
+/// cloud's plane of symmetry. `points` are upright (+y up), in any unit. `None` when the cloud
+/// shows no symmetry near that heading.
 ///
 /// A heading a few degrees off leaves the mirror images and the network's views turned by as
 /// much, which costs more F1@0.01 than any other part of orientation; the symmetry plane of a
@@ -575,7 +574,7 @@ pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
 pub const MAX_ROLL: f64 = 4.0;
 /// Support (the share of points mirrored onto others) the upright plane needs before a roll
 /// is looked for: one-sided scans pair too few points to tell a roll from the plane's offset,
-/// and on upright ones the roll found then scatters by degrees (docs/completing.md).
+/// and on upright ones the roll found then scatters by degrees (lab/2026-12-05-roll).
 const MIN_ROLL_SUPPORT: f64 = 0.3;
 
 /// How far a vehicle leans across its width, in degrees about its length: `points` are in the
@@ -583,7 +582,7 @@ const MIN_ROLL_SUPPORT: f64 = 0.3;
 /// best has the normal (cos r, sin r, 0) for the r returned, within ±[`MAX_ROLL`]. A scanner's
 /// up axis is the plumb line, while a vehicle on a cambered road or a kerb leans with it, and
 /// its mirror images then land beside their partners: a lean of 1.5° cost the mirror a tenth of
-/// its F1@0.01 on the validation split (docs/completing.md). `None` when the cloud does not
+/// its F1@0.01 on the validation split (lab/2026-12-05-roll). `None` when the cloud does not
 /// show enough symmetry to tell.
 pub fn find_roll(points: &[[f64; 3]]) -> Option<f64> {
     let sample = cross_section_sample(points)?;

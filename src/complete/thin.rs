@@ -2,7 +2,7 @@
 //!
 //! A 128² model re-projects four points where a 64² one re-projects one, each with its own depth
 //! noise; inside `complete` that density buys nothing (the metrics score points against the
-//! surface) and the extra noisy layers cost Chamfer distance (docs/completing.md, *Thinning*).
+//! surface) and the extra noisy layers cost Chamfer distance (docs/pipeline.md, *7. Merge*).
 
 use std::collections::HashMap;
 

@@ -5,7 +5,7 @@
 //! copies. Written with Burn's tensor ops the same convolution leaves a full-size temporary and
 //! a sum behind every tap (49 of each for a 7×7 kernel), instance norm takes five passes over its
 //! input and the space to depth a permute copied element by element; the built-in model's
-//! forward is ~25 % faster this way, `complete` ~17 % (docs/speed.md, *Accumulating products*),
+//! forward is ~25 % faster this way, `complete` ~17 % (lab/2026-12-06-cpu-inference-kernels),
 //! and the tiles take another 10–20 % off the forward (*Winograd's tiles*). Training keeps
 //! Burn's ops, whose gradients it needs; the results agree to rounding (tested).
 

@@ -255,7 +255,7 @@ impl Generator {
 /// colour, and an occupancy logit of [`MEASURED_LOGIT`]. A measured point is exact to the
 /// metrics, which score points against the true surface, while a pixel of the ground truth's
 /// view is one sample of a footprint 1.6 % of the object wide at 64²: trained to that target,
-/// a learned blend closed itself and the network alone lost F1 (docs/training.md).
+/// a learned blend closed itself and the network alone lost F1 (lab/2026-12-02-input-copy).
 ///
 /// # Shapes
 /// `prediction`, `input`: `[batch, views, C + 1, S, S]` (images, then the occupancy logit or

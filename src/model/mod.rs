@@ -110,10 +110,10 @@ pub struct ModelConfig {
 pub enum Preset {
     /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
     Paper,
-    /// w 56, r 6, S 128, zero padding: chosen by measurement (see docs/speed.md) as the largest
-    /// whose whole `complete` stayed within a second on two cores (2026-12-01), and `train`'s
-    /// default until it took the built-in model's shape (w 48, r 2, measured the same way on
-    /// 2026-12-04, docs/training.md).
+    /// w 56, r 6, S 128, zero padding: chosen by measurement (see
+    /// lab/2026-11-22-network-cpu-forward) as the largest whose whole `complete` stayed within a
+    /// second on two cores (2026-12-01), and `train`'s default until it took the built-in model's
+    /// shape (w 48, r 2, measured the same way on 2026-12-04, lab/2026-12-04-widening).
     Cpu,
     /// w 32, r 4, S 128, V 4 (18.7 GFLOP per object).
     Small,
@@ -244,9 +244,9 @@ impl ModelConfig {
 
     /// Whether the generator's output keeps the input's pixels: where the input has one, its
     /// geometry and colour replace the prediction's and the pixel is occupied, as inpainting
-    /// networks composite their output with the known image. Without it the decoder must
-    /// rebuild every measured pixel from quarter-size features, which it does to a few pixels'
-    /// depth (docs/training.md); with it the network spends itself on the pixels it completes.
+    /// networks composite their output with the known image. Without it the decoder must rebuild
+    /// every measured pixel from quarter-size features, which it does to a few pixels' depth
+    /// (lab/2026-12-02-input-copy); with it the network spends itself on the pixels it completes.
     /// It adds no weights, so weights trained either way load either way.
     pub fn copies_input(&self) -> bool {
         self.input_copy == Some(true)
@@ -262,7 +262,7 @@ impl ModelConfig {
     /// with BCE against whole objects, and a network that cannot place a pixel exactly still
     /// gives the pixels of a gap it fills a small probability: a threshold below one half
     /// keeps them, and with them points in the gaps the mean squared distance counts most
-    /// (docs/training.md, *The occupancy threshold*).
+    /// (lab/2026-12-02-occupancy-threshold).
     pub fn occupancy_threshold(&self) -> f64 {
         self.occupancy.unwrap_or(0.5)
     }

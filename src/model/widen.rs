@@ -4,7 +4,7 @@
 //! So the old channels compute what they computed, and the output, which reads only old
 //! channels at first, is the narrow model's; training then lets the new channels in. This is
 //! how a wider network continues the relay from the built-in model's weights instead of from
-//! nothing (docs/training.md).
+//! nothing (docs/training.md, *Starting from trained weights*).
 //!
 //! The instance norms have no parameters and act per channel, so they need nothing; a residual
 //! block added at the same time would not start as the identity (a zero convolution followed by

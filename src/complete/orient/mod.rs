@@ -20,14 +20,15 @@ use crate::core::cloud::PointCloud;
 use crate::core::frame::{upright, UpAxis};
 use std::str::FromStr;
 
-/// The built-in orientation network (see docs/orientation.md for how it was trained); a
-/// `static` for the reason [`crate::complete::DEFAULT_MODEL`] is one.
+/// The built-in orientation network (see docs/pipeline.md, *3. Heading, roll and the network's
+/// pose* for how it was trained); a `static` for the reason [`crate::complete::DEFAULT_MODEL`] is
+/// one.
 pub static DEFAULT_ORIENTER: &[u8] = include_bytes!("../../../assets/orienter.safetensors");
 
 /// How `complete` finds the heading (`--orient`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum OrientMode {
-    /// The estimator that measured best (see docs/orientation.md).
+    /// The estimator that measured best (see lab/2026-12-06-orientation-test-split).
     Auto,
     /// Footprint rectangle and height heuristic.
     Geometric,
@@ -290,7 +291,7 @@ fn smallest_rectangle_axis(points: &[[f64; 3]]) -> f64 {
 }
 
 /// Share of the points a flank must hold for [`footprint_axis`] to take its axis over the
-/// smallest rectangle's (chosen on the validation split, docs/orientation.md).
+/// smallest rectangle's (chosen on the validation split, lab/2026-12-02-orientation-wheels-flank).
 const FLANK_AXIS: f64 = 0.4;
 
 /// The heading (one of the axis's two) with the largest [`flank_share`], searched at 1° then
@@ -357,7 +358,7 @@ fn flank_share(points: &[[f64; 3]], heading: f64) -> f64 {
 /// Width of the band [`straightest_flank`] looks for a flank in, over the footprint's length:
 /// about the generated scans' range noise, so that a straight flank seen edge-on from above
 /// falls within it. Chosen on the validation split among 0.002, 0.003, 0.004, 0.005 and 0.01
-/// (docs/orientation.md).
+/// (lab/2026-12-06-orientation-flank-tyres).
 const FLANK_BAND: f64 = 0.003;
 /// [`straightest_flank`] turns the axis by at most this many degrees, in steps of
 /// [`FLANK_STEP`].
@@ -480,14 +481,14 @@ fn extents(points: &[[f64; 3]], heading: f64) -> (f64, (f64, f64)) {
 }
 
 /// Points below this share of the height are where the wheels meet the ground. Chosen on the
-/// validation split among 0.03, 0.05 and 0.1 (docs/orientation.md).
+/// validation split among 0.03, 0.05 and 0.1 (lab/2026-12-02-orientation-wheels-flank).
 pub(crate) const GROUND: f64 = 0.05;
 /// The ground points must span at least this share of the footprint's length along their line,
 /// so that both ends' wheels are in it.
 const WHEELBASE: f64 = 0.5;
 /// ... and lie this thin across it (RMS across over RMS along): a line, not a patch. On the
-/// validation split 0.1, 0.2 and 0.3 score alike (docs/orientation.md); at 0.2 a few low
-/// returns from the far wheels of a real scan (CAR164) turned its line 3° off its flank.
+/// validation split 0.1, 0.2 and 0.3 score alike (lab/2026-12-02-orientation-wheels-flank); at 0.2
+/// a few low returns from the far wheels of a real scan (CAR164) turned its line 3° off its flank.
 const WHEEL_LINE_WIDTH: f64 = 0.1;
 /// The wheels' line turns an estimate by at most this many degrees; more is another line.
 const MAX_WHEEL_TURN: f64 = 20.0;

@@ -397,7 +397,8 @@ fn kept_of(scan: &PointCloud, cleaned: &PointCloud) -> usize {
 fn load_completer() -> Result<Completer, Error> {
     let (model, orienter) = (arg("--model"), arg("--orienter"));
     fn source(path: &Option<String>) -> Source<'_> {
-        path.as_ref().map_or(Source::Builtin, |p| Source::File(Path::new(p)))
+        path.as_ref()
+            .map_or(Source::Builtin, |p| Source::File(Path::new(p)))
     }
     let completer = Completer::load(source(&model), source(&orienter), Device::flex(), None)?;
     Ok(completer)

@@ -246,7 +246,7 @@ fn any_within(points: &[[f64; 3]], a: &[usize], b: &[usize], link: f64) -> bool 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::complete::orient::tests::car_block;
+    use crate::complete::upright::fixtures::car_block;
 
     /// A car-like block (metres, z up) standing on a ground patch, with noise points around
     /// and below it and a piece of a second object 3 m away.

@@ -17,6 +17,7 @@ pub mod orient;
 pub mod preview;
 pub mod symmetry;
 pub mod thin;
+pub mod upright;
 
 use crate::complete::clean::{clean, CleanReport};
 use crate::complete::filter::SorParams;

@@ -6,7 +6,7 @@
 //! Points close to a candidate plane map onto themselves whatever the candidate, so they are not
 //! counted; otherwise a flat side would always be "symmetric" about itself.
 
-use crate::complete::orient::{at_height, GROUND};
+use crate::complete::upright::{at_height, GROUND};
 use crate::core::cloud::Aabb;
 use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -876,8 +876,8 @@ pub fn mirror(p: [f64; 3], offset: f64) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::complete::orient::angle_between;
-    use crate::complete::orient::tests::{car_block, driven_past};
+    use crate::complete::upright::angle_between;
+    use crate::complete::upright::fixtures::{car_block, driven_past};
     use crate::datagen::shapes::{example_car, scanned_side};
     use crate::datagen::synth::Category;
 

@@ -31,7 +31,7 @@ use crate::core::knn::{KnnIndex, MatchGrid};
 use crate::io::{read_bytes, Problem};
 use crate::model::inpaint::{InpaintError, Inpainter};
 use crate::model::weights::{generator_in, read_config, Network, NoGenerator, WeightsError};
-use crate::model::{ConfigError, ModelConfig};
+use crate::model::{ConfigError, ModelConfig, Preset};
 use crate::views::projection::ViewImages;
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
@@ -255,6 +255,46 @@ pub enum LoadError {
 
 fn read_weights(path: &Path) -> Result<Vec<u8>, LoadError> {
     read_bytes(path).map_err(|source| LoadError::Read {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The name of the built-in model's shape where a model shape is named (`--config`).
+pub const BUILTIN_SHAPE: &str = "builtin";
+
+/// Why a named model shape could not be had.
+#[derive(Debug, Error)]
+pub enum ShapeError {
+    #[error("the built-in model: {0}")]
+    Builtin(#[source] WeightsError),
+    #[error("--config {name}: neither {BUILTIN_SHAPE}, a preset (cpu, paper, small, tiny) nor a readable file: {source}")]
+    Unreadable {
+        name: String,
+        source: std::io::Error,
+    },
+    #[error("{}: not a model config: {source}", path.display())]
+    NotAConfig {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+}
+
+/// The model shape `name` names: [`BUILTIN_SHAPE`], a preset (`cpu`, `paper`, `small`, `tiny`)
+/// or a JSON file holding a model config (as a run's config.json).
+pub fn named_shape(name: &str) -> Result<ModelConfig, ShapeError> {
+    if name.eq_ignore_ascii_case(BUILTIN_SHAPE) {
+        return builtin_shape().map_err(ShapeError::Builtin);
+    }
+    if let Ok(preset) = <Preset as clap::ValueEnum>::from_str(name, true) {
+        return Ok(preset.config());
+    }
+    let path = Path::new(name);
+    let text = std::fs::read_to_string(path).map_err(|source| ShapeError::Unreadable {
+        name: name.to_string(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|source| ShapeError::NotAConfig {
         path: path.to_path_buf(),
         source,
     })

@@ -9,6 +9,8 @@ pub mod dataset;
 pub mod loader;
 pub mod orient;
 pub mod plot;
+mod report;
+pub mod resume;
 mod session;
 pub mod validate;
 
@@ -443,7 +445,8 @@ pub trait Monitor {
     fn interrupted(&self) -> bool;
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Outcome {
     /// Every stage ended.
     Finished,

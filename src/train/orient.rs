@@ -6,11 +6,13 @@ use crate::complete::orient::net::{sample_points, target, Orienter, OrienterConf
 use crate::complete::orient::{angle_between, heading_of_turn};
 use crate::core::rng::{derive_seed, Lcg};
 use crate::model::gan::value;
+use crate::model::weights::WeightsError;
 use crate::train::dataset::{hold_back, scan_split, Cache, DataError, SampleRef};
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use serde::{Deserialize, Serialize};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use thiserror::Error;
@@ -325,6 +327,98 @@ fn draw_batch(
         filled += 1;
     }
     Ok((inputs, targets))
+}
+
+/// The weights file of a trained orientation run.
+pub const WEIGHTS_FILE: &str = "orienter.safetensors";
+
+#[derive(Debug, Error)]
+pub enum OrientRunError {
+    #[error("{}: exists and is not a directory", .0.display())]
+    NotADirectory(PathBuf),
+    #[error("{}: already holds {WEIGHTS_FILE}; choose another --out", .0.display())]
+    AlreadyTrained(PathBuf),
+    #[error("{}: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {source}", path.display())]
+    Log {
+        path: PathBuf,
+        source: OrientTrainError,
+    },
+    #[error(transparent)]
+    Train(#[from] OrientTrainError),
+    #[error(transparent)]
+    Weights(#[from] WeightsError),
+}
+
+/// Refuses a run directory whose name a file holds, or that holds a trained network already.
+pub fn check_run_dir(out: &Path) -> Result<(), OrientRunError> {
+    if out.exists() && !out.is_dir() {
+        return Err(OrientRunError::NotADirectory(out.to_path_buf()));
+    }
+    if out.join(WEIGHTS_FILE).exists() {
+        return Err(OrientRunError::AlreadyTrained(out.to_path_buf()));
+    }
+    Ok(())
+}
+
+/// Trains into the run directory `out`: `config.json` and `train-orient.json` first, each
+/// step's record appended to `log.jsonl` (and passed to `on_record`), the weights last. The
+/// weights file and the best validation scores.
+pub fn train_orienter_in(
+    out: &Path,
+    data: &OrientData,
+    config: &OrienterConfig,
+    settings: &OrientSettings,
+    device: &Device,
+    cache_bytes: usize,
+    mut on_record: impl FnMut(&OrientRecord),
+) -> Result<(PathBuf, OrientScores), OrientRunError> {
+    std::fs::create_dir_all(out).map_err(|source| OrientRunError::Write {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    write_file(&out.join("config.json"), |w| to_json(w, config))?;
+    write_file(&out.join("train-orient.json"), |w| to_json(w, settings))?;
+    let log_path = out.join("log.jsonl");
+    let mut log = std::fs::File::create(&log_path).map_err(|source| OrientRunError::Write {
+        path: log_path.clone(),
+        source,
+    })?;
+    let monitor = |record: &OrientRecord| {
+        on_record(record);
+        let line = serde_json::to_string(record).map_err(std::io::Error::other)?;
+        writeln!(log, "{line}")
+    };
+    let (orienter, scores) = train_orienter(data, config, settings, device, cache_bytes, monitor)
+        .map_err(|e| match e {
+        OrientTrainError::Monitor { .. } => OrientRunError::Log {
+            path: log_path.clone(),
+            source: e,
+        },
+        e => e.into(),
+    })?;
+    let weights = out.join(WEIGHTS_FILE);
+    let bytes = orienter.to_bytes()?;
+    write_file(&weights, |w| w.write_all(&bytes))?;
+    Ok((weights, scores))
+}
+
+fn write_file(
+    path: &Path,
+    body: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), OrientRunError> {
+    crate::io::atomic_write(path, body).map_err(|source| OrientRunError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn to_json(w: &mut impl std::io::Write, value: &impl Serialize) -> std::io::Result<()> {
+    serde_json::to_writer_pretty(w, value).map_err(std::io::Error::other)
 }
 
 #[cfg(test)]

@@ -14,36 +14,12 @@ mod train_orient;
 use crate::cli::args::{Cli, Command};
 use crate::cli::streams::tell;
 use anyhow::{bail, Context};
-use clap::ValueEnum;
 use mvpcc::app::Progress;
-use mvpcc::complete::builtin_shape;
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::io::{non_finite_warning, read_cloud, Format};
 use mvpcc::model::device::{open, DeviceChoice, Opened};
-use mvpcc::model::{ModelConfig, Preset};
 use std::fmt::Display;
 use std::path::Path;
-
-/// `--config`'s name for the built-in model's shape, the default of `train` and `profile`.
-const BUILTIN: &str = "builtin";
-
-/// The model shape `--config` names: [`BUILTIN`], a preset (`cpu`, `paper`, `small`, `tiny`) or
-/// a JSON file holding a model config (as a run's config.json).
-fn model_shape(name: &str) -> anyhow::Result<ModelConfig> {
-    if name.eq_ignore_ascii_case(BUILTIN) {
-        return builtin_shape().context("the built-in model");
-    }
-    if let Ok(preset) = Preset::from_str(name, true) {
-        return Ok(preset.config());
-    }
-    let path = Path::new(name);
-    let text = std::fs::read_to_string(path).with_context(|| {
-        format!(
-            "--config {name}: neither {BUILTIN}, a preset (cpu, paper, small, tiny) nor a readable file"
-        )
-    })?;
-    serde_json::from_str(&text).with_context(|| format!("{}: not a model config", path.display()))
-}
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     crate::cli::interrupt::install().context("cannot install the signal handler")?;
@@ -166,6 +142,20 @@ impl Progress for Bar {
     fn finish(&self) {
         if let Some(bar) = self.bar.get() {
             bar.finish_and_clear();
+        }
+    }
+
+    fn warn(&self, message: &str) {
+        match self.bar.get() {
+            Some(bar) => bar.suspend(|| self.log.warn(message)),
+            None => self.log.warn(message),
+        }
+    }
+
+    fn note(&self, message: &str) {
+        match self.bar.get() {
+            Some(bar) => bar.suspend(|| self.log.info(message)),
+            None => self.log.info(message),
         }
     }
 }

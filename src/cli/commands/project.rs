@@ -1,12 +1,9 @@
 use super::{load, Log};
 use crate::cli::args::ProjectArgs;
 use crate::cli::count;
-use anyhow::Context;
+use mvpcc::app::views::project_into;
 use mvpcc::core::camera::{Camera, CameraError};
-use mvpcc::core::frame::Frame;
 use mvpcc::io::default_up;
-use mvpcc::views::projection::project;
-use mvpcc::views::{write_views, ViewsInfo};
 
 pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
     let cameras = Camera::set(&args.views.0, args.size).map_err(|e| match e {
@@ -19,34 +16,15 @@ pub(super) fn run(args: ProjectArgs, log: Log) -> anyhow::Result<()> {
     let up = args
         .up
         .unwrap_or_else(|| default_up(&args.input, args.input_options.format));
-    let frame = Frame::fit(&cloud, up).with_context(|| args.input.display().to_string())?;
-    let normalized = frame.normalize(&cloud);
-    let views = project(
-        &normalized.positions_f32(),
-        normalized.colors.as_deref(),
-        &cameras,
-    );
-    if !outdir.is_dir() {
-        std::fs::create_dir(outdir)
-            .with_context(|| format!("{}: cannot create", outdir.display()))?;
-    }
-    write_views(outdir, &views)?;
-    let info = ViewsInfo {
-        frame,
-        up,
-        views: args.views.0.clone(),
-        size: args.size,
-        points: cloud.len(),
-    };
-    info.write(outdir)?;
+    let views = project_into(&cloud, &args.input, up, &cameras, outdir)?;
     log.info(format!(
         "{}: {} → {} of {}×{} px, {} occupied",
         outdir.display(),
         count(cloud.len(), "point"),
-        count(views.views(), "view"),
+        count(views.views, "view"),
         args.size,
         args.size,
-        count(views.occupied(), "pixel")
+        count(views.occupied, "pixel")
     ));
     Ok(())
 }

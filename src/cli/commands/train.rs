@@ -1,55 +1,19 @@
 //! `mvpcc train`: options → settings (or a run's saved settings on `--resume`), the device,
 //! Ctrl-C, and a progress bar over the training loop.
 
-use super::{model_shape, Log, BUILTIN};
+use super::Log;
 use crate::cli::args::TrainArgs;
 use crate::cli::streams::{say, tell};
-use anyhow::{bail, Context};
+use mvpcc::complete::{named_shape, BUILTIN_SHAPE};
+
 use indicatif::ProgressBar;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::ModelConfig;
 use mvpcc::train::dataset::scan_split;
-use mvpcc::train::{
-    train, InitWeights, Job, LogRecord, Monitor, Outcome, Summary, TrainSettings, CONFIG_FILE,
-    SETTINGS_FILE,
-};
-use serde_json::Value;
+use mvpcc::train::{resume, train, InitWeights, Job, LogRecord, Monitor, Summary, TrainSettings};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// Settings a resumed run may change: they decide how the run is carried out and reported, not
-/// what it computes (the training samples scored beside the validation decide nothing).
-const OPERATIONAL: [&str; 3] = ["log_every", "keep", "seen_samples"];
-
-fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot resume without it", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{}: unreadable", path.display()))
-}
-
-/// The run's settings, those it was saved without at their defaults: a run started before a
-/// setting existed ran as its default (the depth term's weight, for one, was 0 before it could
-/// be set).
-fn read_saved_settings(path: &Path) -> anyhow::Result<TrainSettings> {
-    let mut saved: Value = read_saved(path)?;
-    fill_missing(&mut saved, &serde_json::to_value(TrainSettings::default())?);
-    serde_json::from_value(saved).with_context(|| format!("{}: unreadable", path.display()))
-}
-
-fn fill_missing(saved: &mut Value, defaults: &Value) {
-    let (Value::Object(saved), Value::Object(defaults)) = (saved, defaults) else {
-        return;
-    };
-    for (key, default) in defaults {
-        match saved.get_mut(key) {
-            Some(value) => fill_missing(value, default),
-            None => {
-                saved.insert(key.clone(), default.clone());
-            }
-        }
-    }
-}
 
 /// The options given on the command line applied over `base`.
 fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
@@ -97,31 +61,6 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
     s
 }
 
-/// The first field of `new` that differs from `saved`, ignoring `except`, named down to the
-/// innermost field (`loss.style`).
-fn first_difference<T: serde::Serialize>(saved: &T, new: &T, except: &[&str]) -> Option<String> {
-    let (Ok(a), Ok(b)) = (serde_json::to_value(saved), serde_json::to_value(new)) else {
-        return None;
-    };
-    differing_field(&a, &b, except, "")
-}
-
-fn differing_field(a: &Value, b: &Value, except: &[&str], path: &str) -> Option<String> {
-    let (Value::Object(a), Value::Object(b)) = (a, b) else {
-        return (a != b).then(|| format!("{path}: the run has {a}, the options give {b}"));
-    };
-    a.iter()
-        .filter(|(k, _)| !except.contains(&k.as_str()))
-        .find_map(|(k, v)| {
-            let inner = if path.is_empty() {
-                k.clone()
-            } else {
-                format!("{path}.{k}")
-            };
-            differing_field(v, b.get(k).unwrap_or(&Value::Null), &[], &inner)
-        })
-}
-
 fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {
     model.validate()?;
     Ok(settings.validate()?)
@@ -148,23 +87,14 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         }
     };
     let (settings, mut model) = if args.resume {
-        let saved = read_saved_settings(&run.join(SETTINGS_FILE))?;
-        let saved_model: ModelConfig = read_saved(&run.join(CONFIG_FILE))?;
-        let settings = apply(args, saved.clone());
-        if let Some(diff) = first_difference(&saved, &settings, &OPERATIONAL) {
-            bail!(
-                "{}: a resumed run keeps its settings ({diff})",
-                run.display()
-            );
-        }
+        let saved = resume::saved(run)?;
+        let settings = apply(args, saved.0.clone());
         let model = match &args.config {
-            Some(name) => fresh_model(model_shape(name)?),
-            None => fresh_model(saved_model.clone()),
+            Some(name) => fresh_model(named_shape(name)?),
+            None => fresh_model(saved.1.clone()),
         }
-        .with_views(saved_model.views);
-        if let Some(diff) = first_difference(&saved_model, &model, &[]) {
-            bail!("{}: a resumed run keeps its model ({diff})", run.display());
-        }
+        .with_views(saved.1.views);
+        resume::check_unchanged(run, &saved, &settings, &model)?;
         (settings, model)
     } else {
         let mut settings = apply(args, TrainSettings::default());
@@ -176,7 +106,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             })
             .transpose()?;
         let base = match (&args.config, &settings.init) {
-            (Some(name), _) => model_shape(name)?,
+            (Some(name), _) => named_shape(name)?,
             (None, Some(init)) => {
                 let own = init.config()?;
                 ModelConfig {
@@ -184,7 +114,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
                     ..own
                 }
             }
-            (None, None) => model_shape(BUILTIN)?,
+            (None, None) => named_shape(BUILTIN_SHAPE)?,
         };
         (settings, fresh_model(base))
     };
@@ -228,33 +158,7 @@ impl Monitor for Progress {
     }
 
     fn record(&mut self, record: &LogRecord) {
-        let line = match record {
-            LogRecord::Train { .. } => return,
-            LogRecord::Validation {
-                step, scores, seen, ..
-            } => format!(
-                "step {step}: validation CD {} F1@0.01 {:.3} (P {:.3} R {:.3}), geometry PSNR {:.2} dB SSIM {:.3}{}{}",
-                cd_text(scores.cd),
-                scores.f1,
-                scores.precision,
-                scores.recall,
-                scores.geometry.psnr,
-                scores.geometry.ssim,
-                scores.color.map_or(String::new(), |c| format!(", colour PSNR {:.2} dB", c.psnr)),
-                seen.as_ref().map_or(String::new(), |s| format!(
-                    "; training samples CD {} F1@0.01 {:.3}",
-                    cd_text(s.cd),
-                    s.f1
-                )),
-            ),
-            LogRecord::Baseline { scores } => format!(
-                "partial inputs of the {} validation samples: CD {} F1@0.01 {:.3}",
-                scores.samples,
-                scores.cd.map_or("-".to_string(), |c| format!("{c:.3e}")),
-                scores.f1
-            ),
-        };
-        if !self.log.quiet() {
+        if let Some(line) = record.said().filter(|_| !self.log.quiet()) {
             self.bar.suspend(|| tell(line));
         }
     }
@@ -262,10 +166,6 @@ impl Monitor for Progress {
     fn interrupted(&self) -> bool {
         self.stop.load(Ordering::SeqCst)
     }
-}
-
-fn cd_text(cd: Option<f64>) -> String {
-    cd.map_or("- (empty output)".to_string(), |c| format!("{c:.3e}"))
 }
 
 fn default_run(data: &Path) -> PathBuf {
@@ -314,7 +214,7 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     report(&result?, &settings, &run, args.json, log)
 }
 
-/// How the run ended and its best validation on stderr; with `json`, the summary on stdout.
+/// How the run ended and its best validation on stderr; with `json`, the report on stdout.
 fn report(
     summary: &Summary,
     settings: &TrainSettings,
@@ -322,44 +222,11 @@ fn report(
     json: bool,
     log: Log,
 ) -> anyhow::Result<()> {
-    match summary.outcome {
-        Outcome::Interrupted => log.info(format!(
-            "interrupted at step {}: checkpoint {} (continue with --resume)",
-            summary.state.step,
-            summary.checkpoint.display()
-        )),
-        Outcome::StepLimit => log.info(format!(
-            "stopped at step {} (--steps): checkpoint {}",
-            summary.state.step,
-            summary.checkpoint.display()
-        )),
-        Outcome::Finished => log.info(format!(
-            "all {} stages done at step {}: checkpoint {}",
-            settings.stage_rates.len(),
-            summary.state.step,
-            summary.checkpoint.display()
-        )),
-    }
-    if let (Some(cd), Some(step)) = (summary.state.best_cd, summary.state.best_step) {
-        log.info(format!(
-            "best validation CD {cd:.3e} at step {step}: {}",
-            run.join("best").display()
-        ));
+    for line in summary.said(settings.stage_rates.len(), run) {
+        log.info(line);
     }
     if json {
-        let json = serde_json::json!({
-            "run": run,
-            "outcome": format!("{:?}", summary.outcome).to_lowercase(),
-            "step": summary.state.step,
-            "stage": summary.state.stage + 1,
-            "checkpoint": summary.checkpoint,
-            "best_cd": summary.state.best_cd,
-            "best_step": summary.state.best_step,
-            "baseline": summary.baseline,
-            "validation": summary.last,
-            "seen": summary.last_seen,
-        });
-        say(serde_json::to_string_pretty(&json)?)?;
+        say(serde_json::to_string_pretty(&summary.report(run))?)?;
     }
     Ok(())
 }

@@ -1,0 +1,242 @@
+//! Procedural meshes written to a folder (`synth`, and `prepare --synth`): the objects as OBJ
+//! under `OUT/<category>/`, their manifest `synth.json`, and a contact sheet.
+
+use super::Progress;
+use crate::datagen::mesh::{write_obj, Mesh};
+use crate::datagen::synth::{contact_sheet, synthesize, Category, Draw, MAX_OBJECTS};
+use crate::io::atomic_write;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+pub const SYNTH_FILE: &str = "synth.json";
+/// Objects on the contact sheet: a 4 × 4 grid stays legible at 192 px a tile.
+const PREVIEW_OBJECTS: usize = 16;
+
+#[derive(Debug, Error)]
+pub enum SynthError {
+    #[error("{option} must lie in 1..={MAX_OBJECTS}, got {count}")]
+    Count { option: &'static str, count: usize },
+    #[error("--category: {0} given twice")]
+    CategoryTwice(&'static str),
+    #[error("{}: exists and is not a directory", .0.display())]
+    NotADirectory(PathBuf),
+    #[error("{}: cannot create: {source}", path.display())]
+    Create {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: cannot write: {source}", path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// `synth.json`: how a mesh directory was generated.
+#[derive(Debug, Serialize, Deserialize, PartialEq)]
+pub struct SynthManifest {
+    pub mvpcc_version: String,
+    pub seed: u64,
+    pub categories: Vec<Category>,
+    /// How often each of `categories` was drawn, relative to the others; absent from manifests
+    /// written before weights could be given, whose categories had their default weights.
+    #[serde(default)]
+    pub weights: Vec<f64>,
+    pub objects: Vec<SynthEntry>,
+}
+
+impl SynthManifest {
+    fn draws(&self) -> Vec<Draw> {
+        if self.weights.len() != self.categories.len() {
+            return self.categories.iter().map(|&c| c.into()).collect();
+        }
+        let pairs = self.categories.iter().zip(&self.weights);
+        pairs
+            .map(|(&category, &weight)| Draw { category, weight })
+            .collect()
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize, PartialEq)]
+pub struct SynthEntry {
+    /// Generation index: with the run's seed and draws it gives the object back.
+    pub index: usize,
+    pub name: String,
+    pub category: Category,
+    pub variant: String,
+    pub seed: u64,
+    pub path: PathBuf,
+    pub triangles: usize,
+}
+
+/// What a generation did.
+#[derive(Debug)]
+pub struct Generated {
+    pub manifest: SynthManifest,
+    /// The folder already held exactly this run, so nothing was written.
+    pub already: bool,
+    pub seconds: f64,
+    pub preview: Option<PathBuf>,
+}
+
+/// Refuses an object count outside 1..=[`MAX_OBJECTS`], naming the option it came from.
+pub fn check_count(count: usize, option: &'static str) -> Result<(), SynthError> {
+    if !(1..=MAX_OBJECTS).contains(&count) {
+        return Err(SynthError::Count { option, count });
+    }
+    Ok(())
+}
+
+/// Writes `count` objects drawn from `draws` with `seed` into `out` (skipping the work when
+/// `out` already holds exactly this run), and with `preview` their contact sheet.
+pub fn generate(
+    out: &Path,
+    count: usize,
+    draws: &[Draw],
+    seed: u64,
+    preview: bool,
+    progress: &dyn Progress,
+) -> Result<Generated, SynthError> {
+    if out.exists() && !out.is_dir() {
+        return Err(SynthError::NotADirectory(out.to_path_buf()));
+    }
+    check_draws(draws)?;
+    let manifest_path = out.join(SYNTH_FILE);
+    let started = std::time::Instant::now();
+    let (manifest, already) = match already_generated(&manifest_path, count, draws, seed) {
+        Some(done) => (done, true),
+        None => (write_objects(out, count, draws, seed, progress)?, false),
+    };
+    if !already {
+        write_json(&manifest_path, &manifest)?;
+    }
+    let preview = if preview {
+        Some(write_preview(out, &manifest)?)
+    } else {
+        None
+    };
+    Ok(Generated {
+        manifest,
+        already,
+        seconds: started.elapsed().as_secs_f64(),
+        preview,
+    })
+}
+
+fn write_objects(
+    out: &Path,
+    count: usize,
+    draws: &[Draw],
+    seed: u64,
+    progress: &dyn Progress,
+) -> Result<SynthManifest, SynthError> {
+    create_dir(out)?;
+    progress.start(count, "synth");
+    let objects = (0..count)
+        .into_par_iter()
+        .map(|i| {
+            let entry = write_object(out, i, seed, draws)?;
+            progress.done(&entry.name);
+            Ok(entry)
+        })
+        .collect::<Result<Vec<_>, SynthError>>()?;
+    progress.finish();
+    Ok(SynthManifest {
+        mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
+        seed,
+        categories: draws.iter().map(|d| d.category).collect(),
+        weights: draws.iter().map(|d| d.weight).collect(),
+        objects,
+    })
+}
+
+fn create_dir(dir: &Path) -> Result<(), SynthError> {
+    std::fs::create_dir_all(dir).map_err(|source| SynthError::Create {
+        path: dir.to_path_buf(),
+        source,
+    })
+}
+
+fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SynthError> {
+    atomic_write(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)
+    })
+    .map_err(|source| SynthError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Refuses a category given twice: which of its weights was meant is not known.
+fn check_draws(draws: &[Draw]) -> Result<(), SynthError> {
+    for (i, d) in draws.iter().enumerate() {
+        if draws[..i].iter().any(|e| e.category == d.category) {
+            return Err(SynthError::CategoryTwice(d.category.name()));
+        }
+    }
+    Ok(())
+}
+
+/// The manifest at `path` when it records exactly this run: `count` objects from `draws`
+/// with `seed`.
+fn already_generated(
+    path: &Path,
+    count: usize,
+    draws: &[Draw],
+    seed: u64,
+) -> Option<SynthManifest> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let done = serde_json::from_str::<SynthManifest>(&text).ok()?;
+    (done.seed == seed && done.draws() == draws && done.objects.len() == count).then_some(done)
+}
+
+/// Synthesizes object `index` of the run and writes it to OUT/CATEGORY/NAME.obj.
+fn write_object(
+    out: &Path,
+    index: usize,
+    seed: u64,
+    draws: &[Draw],
+) -> Result<SynthEntry, SynthError> {
+    let s = synthesize(index, seed, draws);
+    let dir = out.join(s.category.name());
+    create_dir(&dir)?;
+    let path = dir.join(format!("{}.obj", s.name));
+    write_obj(&path, &s.mesh).map_err(|source| SynthError::Write {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(SynthEntry {
+        index,
+        name: s.name,
+        category: s.category,
+        variant: s.variant,
+        seed: s.seed,
+        path: path.strip_prefix(out).unwrap_or(&path).to_path_buf(),
+        triangles: s.mesh.triangles.len(),
+    })
+}
+
+/// The contact sheet of the first objects as `OUT/preview.png`; its path.
+fn write_preview(out: &Path, manifest: &SynthManifest) -> Result<PathBuf, SynthError> {
+    let meshes: Vec<Mesh> = manifest
+        .objects
+        .iter()
+        .take(PREVIEW_OBJECTS)
+        .map(|o| synthesize(o.index, manifest.seed, &manifest.draws()).mesh)
+        .collect();
+    let refs: Vec<&Mesh> = meshes.iter().collect();
+    let sheet = contact_sheet(&refs, 192, 4);
+    let path = out.join("preview.png");
+    atomic_write(&path, |w| {
+        sheet
+            .write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|source| SynthError::Write {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(path)
+}

@@ -2,7 +2,7 @@
 //! batch of files (a tree, a list, a shard of either) on a pool of workers, where one bad file
 //! never stops the others.
 
-use super::Progress;
+use super::{create_dir, PathError, Progress};
 use crate::complete::clean::CleanReport;
 use crate::complete::preview::{render, Layer};
 use crate::complete::symmetry::{Cues, Plane, PlaneFit};
@@ -26,6 +26,8 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum FileError {
+    #[error(transparent)]
+    Path(#[from] PathError),
     #[error(transparent)]
     Cloud(#[from] CloudIoError),
     #[error(transparent)]
@@ -54,15 +56,12 @@ pub enum FileError {
     ViewsNotADirectory(PathBuf),
     #[error("{}: --save-views names an output file", .0.display())]
     ViewsIsOutput(PathBuf),
-    #[error("{}: cannot create: {source}", path.display())]
-    Create {
-        path: PathBuf,
-        source: std::io::Error,
-    },
 }
 
 #[derive(Debug, Error)]
 pub enum BatchRunError {
+    #[error(transparent)]
+    Path(#[from] PathError),
     #[error(transparent)]
     Batch(#[from] BatchError),
     #[error(transparent)]
@@ -350,13 +349,6 @@ fn save_views(dir: &Path, done: &Completion) -> Result<Option<String>, FileError
     Ok(None)
 }
 
-fn create_dir(dir: &Path) -> Result<(), FileError> {
-    std::fs::create_dir_all(dir).map_err(|source| FileError::Create {
-        path: dir.to_path_buf(),
-        source,
-    })
-}
-
 fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> Result<(), FileError> {
     let flags: Vec<bool> = done
         .cloud
@@ -531,6 +523,7 @@ impl Batch {
         let result = output
             .parent()
             .map_or(Ok(()), create_dir)
+            .map_err(FileError::from)
             .and_then(|()| complete_file(&input, &output, self.views(relative).as_deref(), job));
         match result {
             Ok(report) => BatchEntry::Completed(Box::new(report)),

@@ -12,6 +12,53 @@ pub mod synth;
 pub mod table;
 pub mod views;
 
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// A file or folder the services could not create or write.
+#[derive(Debug, Error)]
+#[error("{}: cannot {action}: {source}", path.display())]
+pub struct PathError {
+    pub path: PathBuf,
+    /// "create" or "write".
+    pub action: &'static str,
+    pub source: std::io::Error,
+}
+
+impl PathError {
+    fn at(path: &Path, action: &'static str) -> impl FnOnce(std::io::Error) -> PathError {
+        let path = path.to_path_buf();
+        move |source| PathError {
+            path,
+            action,
+            source,
+        }
+    }
+
+    /// For a folder that could not be created.
+    pub fn create(path: &Path) -> impl FnOnce(std::io::Error) -> PathError {
+        PathError::at(path, "create")
+    }
+
+    /// For a file that could not be written.
+    pub fn write(path: &Path) -> impl FnOnce(std::io::Error) -> PathError {
+        PathError::at(path, "write")
+    }
+}
+
+/// Creates `dir` and the folders above it.
+fn create_dir(dir: &Path) -> Result<(), PathError> {
+    std::fs::create_dir_all(dir).map_err(PathError::create(dir))
+}
+
+/// Writes `value` as pretty JSON to `path`, whole or not at all.
+fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), PathError> {
+    crate::io::atomic_write(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)
+    })
+    .map_err(PathError::write(path))
+}
+
 /// What a long service tells its caller as it goes, for a progress bar; callers without one
 /// pass [`Quiet`]. Called from worker threads.
 pub trait Progress: Sync {

@@ -3,13 +3,12 @@
 //! manifest written by the run that covers them all.
 
 use super::synth::{generate, SynthError};
-use super::Progress;
+use super::{create_dir, write_json, PathError, Progress};
 use crate::datagen::data::{
     discover, finished, prepare_model, Layout, Manifest, ModelEntry, PrepareError, PrepareParams,
     Skipped, Source, MANIFEST_FILE, PARAMS_FILE, TEST, TRAIN,
 };
 use crate::datagen::synth::Draw;
-use crate::io::atomic_write;
 use crate::io::batch::{lies_in, BatchError, Shard};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -20,6 +19,8 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum PrepareRunError {
+    #[error(transparent)]
+    Path(#[from] PathError),
     #[error(transparent)]
     Synth(#[from] SynthError),
     #[error(transparent)]
@@ -42,16 +43,6 @@ pub enum PrepareRunError {
     Settings {
         path: PathBuf,
         source: serde_json::Error,
-    },
-    #[error("{}: cannot create: {source}", path.display())]
-    Create {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: cannot write: {source}", path.display())]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
     },
 }
 
@@ -136,10 +127,7 @@ impl Preparation {
         }
         let meshes = self.meshes_dir(progress, on_synth)?;
         let (mut sources, mut skipped) = self.find_meshes(&meshes)?;
-        std::fs::create_dir_all(out).map_err(|source| PrepareRunError::Create {
-            path: out.clone(),
-            source,
-        })?;
+        create_dir(out)?;
         self.claim()?;
         if let Some(shard) = self.shard {
             sources.retain(|s| shard.owns(&format!("{}/{}", s.category, s.name)));
@@ -216,7 +204,7 @@ impl Preparation {
     fn claim(&self) -> Result<(), PrepareRunError> {
         let path = self.out.join(PARAMS_FILE);
         let Ok(text) = std::fs::read_to_string(&path) else {
-            return write_json(&path, &self.params);
+            return Ok(write_json(&path, &self.params)?);
         };
         let before: PrepareParams = serde_json::from_str(&text)
             .map_err(|source| PrepareRunError::Settings { path, source })?;
@@ -283,16 +271,6 @@ impl Preparation {
         }
         Ok(report)
     }
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> Result<(), PrepareRunError> {
-    atomic_write(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)
-    })
-    .map_err(|source| PrepareRunError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
 }
 
 /// The models of `sources` a previous run finished (their entries) and those still to do.

@@ -1,7 +1,7 @@
 //! Procedural meshes written to a folder (`synth`, and `prepare --synth`): the objects as OBJ
 //! under `OUT/<category>/`, their manifest `synth.json`, and a contact sheet.
 
-use super::Progress;
+use super::{create_dir, write_json, PathError, Progress};
 use crate::datagen::mesh::{write_obj, Mesh};
 use crate::datagen::synth::{contact_sheet, synthesize, Category, Draw, MAX_OBJECTS};
 use crate::io::atomic_write;
@@ -16,22 +16,14 @@ const PREVIEW_OBJECTS: usize = 16;
 
 #[derive(Debug, Error)]
 pub enum SynthError {
+    #[error(transparent)]
+    Path(#[from] PathError),
     #[error("{option} must lie in 1..={MAX_OBJECTS}, got {count}")]
     Count { option: &'static str, count: usize },
     #[error("--category: {0} given twice")]
     CategoryTwice(&'static str),
     #[error("{}: exists and is not a directory", .0.display())]
     NotADirectory(PathBuf),
-    #[error("{}: cannot create: {source}", path.display())]
-    Create {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("{}: cannot write: {source}", path.display())]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
 }
 
 /// `synth.json`: how a mesh directory was generated.
@@ -152,23 +144,6 @@ fn write_objects(
     })
 }
 
-fn create_dir(dir: &Path) -> Result<(), SynthError> {
-    std::fs::create_dir_all(dir).map_err(|source| SynthError::Create {
-        path: dir.to_path_buf(),
-        source,
-    })
-}
-
-fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SynthError> {
-    atomic_write(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)
-    })
-    .map_err(|source| SynthError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
 /// Refuses a category given twice: which of its weights was meant is not known.
 fn check_draws(draws: &[Draw]) -> Result<(), SynthError> {
     for (i, d) in draws.iter().enumerate() {
@@ -203,10 +178,7 @@ fn write_object(
     let dir = out.join(s.category.name());
     create_dir(&dir)?;
     let path = dir.join(format!("{}.obj", s.name));
-    write_obj(&path, &s.mesh).map_err(|source| SynthError::Write {
-        path: path.clone(),
-        source,
-    })?;
+    write_obj(&path, &s.mesh).map_err(PathError::write(&path))?;
     Ok(SynthEntry {
         index,
         name: s.name,
@@ -234,9 +206,6 @@ fn write_preview(out: &Path, manifest: &SynthManifest) -> Result<PathBuf, SynthE
             .write_to(w, image::ImageFormat::Png)
             .map_err(std::io::Error::other)
     })
-    .map_err(|source| SynthError::Write {
-        path: path.clone(),
-        source,
-    })?;
+    .map_err(PathError::write(&path))?;
     Ok(path)
 }

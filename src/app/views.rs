@@ -2,6 +2,7 @@
 //! projected into the original dataset's PNG pairs with the frame that undoes it, and a view
 //! folder eroded, merged, filtered and returned to that frame.
 
+use super::PathError;
 use crate::complete::filter::{inliers, SorParams};
 use crate::core::camera::{Camera, CameraError};
 use crate::core::cloud::PointCloud;
@@ -19,6 +20,8 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum ViewsRunError {
     #[error(transparent)]
+    Path(#[from] PathError),
+    #[error(transparent)]
     Cloud(#[from] CloudIoError),
     #[error(transparent)]
     Views(#[from] ViewError),
@@ -28,11 +31,6 @@ pub enum ViewsRunError {
     Frame { path: PathBuf, source: FrameError },
     #[error("{}: exists and is not a directory", .0.display())]
     NotADirectory(PathBuf),
-    #[error("{}: cannot create: {source}", path.display())]
-    Create {
-        path: PathBuf,
-        source: std::io::Error,
-    },
     #[error("{}: no occupied pixels left to re-project (try a smaller --erode; raw sparse scans need --erode 0)", .0.display())]
     NothingLeft(PathBuf),
 }
@@ -67,10 +65,7 @@ pub fn project_into(
         cameras,
     );
     if !outdir.is_dir() {
-        std::fs::create_dir(outdir).map_err(|source| ViewsRunError::Create {
-            path: outdir.to_path_buf(),
-            source,
-        })?;
+        std::fs::create_dir(outdir).map_err(PathError::create(outdir))?;
     }
     write_views(outdir, &views)?;
     let info = ViewsInfo {

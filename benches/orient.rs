@@ -1,6 +1,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::complete::clean::clean;
-use mvpcc::complete::orient::{orient, OrientMode, Orienter};
+use mvpcc::complete::clean::{clean, CleanParams};
+use mvpcc::complete::orient::{orient, OrientMode, OrientParams, Orienter};
+use mvpcc::complete::symmetry::SymmetryParams;
 use mvpcc::core::frame::UpAxis;
 use std::time::Duration;
 
@@ -19,10 +20,21 @@ fn orientation(c: &mut Criterion) {
         ("combined", OrientMode::Combined),
     ] {
         group.bench_function(label, |b| {
-            b.iter(|| orient(&car, UpAxis::Y, mode, Some(&orienter)))
+            b.iter(|| {
+                orient(
+                    &car,
+                    UpAxis::Y,
+                    mode,
+                    Some(&orienter),
+                    &OrientParams::default(),
+                    &SymmetryParams::default(),
+                )
+            })
         });
     }
-    group.bench_function("clean", |b| b.iter(|| clean(&car, UpAxis::Y)));
+    group.bench_function("clean", |b| {
+        b.iter(|| clean(&car, UpAxis::Y, &CleanParams::default()))
+    });
     group.finish();
 }
 

@@ -4,8 +4,8 @@
 //! what the width costs even on a busy machine.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::complete::orient::{orient, OrientMode, Orienter};
-use mvpcc::complete::symmetry::find_plane;
+use mvpcc::complete::orient::{orient, OrientMode, OrientParams, Orienter};
+use mvpcc::complete::symmetry::{find_plane, SymmetryParams};
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::core::rng::Lcg;
 use mvpcc::datagen::mesh::SignedAxis;
@@ -19,9 +19,16 @@ mod common;
 fn car_in_pose() -> (Vec<[f64; 3]>, String) {
     let (car, name) = common::mls_car();
     let orienter = Orienter::builtin().unwrap();
-    let heading = orient(&car, UpAxis::Y, OrientMode::Combined, Some(&orienter))
-        .heading
-        .unwrap();
+    let heading = orient(
+        &car,
+        UpAxis::Y,
+        OrientMode::Combined,
+        Some(&orienter),
+        &OrientParams::default(),
+        &SymmetryParams::default(),
+    )
+    .heading
+    .unwrap();
     let frame = Frame::fit_heading(&car, UpAxis::Y, heading).unwrap();
     let points = car
         .positions
@@ -60,14 +67,14 @@ fn symmetry(c: &mut Criterion) {
         .sample_size(20)
         .measurement_time(Duration::from_secs(5));
     group.bench_function(format!("{} points ({name}, in pose)", car.len()), |b| {
-        b.iter(|| find_plane(&car, None))
+        b.iter(|| find_plane(&car, None, &SymmetryParams::default()))
     });
     group.bench_function(format!("{} points (bus driven past)", bus.len()), |b| {
-        b.iter(|| find_plane(&bus, None))
+        b.iter(|| find_plane(&bus, None, &SymmetryParams::default()))
     });
     group.bench_function(
         format!("{} points (bus driven past), width given", bus.len()),
-        |b| b.iter(|| find_plane(&bus, Some(width))),
+        |b| b.iter(|| find_plane(&bus, Some(width), &SymmetryParams::default())),
     );
     group.finish();
 }

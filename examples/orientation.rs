@@ -11,8 +11,9 @@
 //! [--limit N] [--orienter FILE] [--model FILE] [--headings-only]`
 
 use burn::tensor::Device;
-use mvpcc::complete::clean::clean;
-use mvpcc::complete::orient::{angle_between, orient, OrientMode, Orienter};
+use mvpcc::complete::clean::{clean, CleanParams};
+use mvpcc::complete::orient::{angle_between, orient, OrientMode, OrientParams, Orienter};
+use mvpcc::complete::symmetry::SymmetryParams;
 use mvpcc::complete::{Completer, Options, Settings, Source};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::{Frame, UpAxis};
@@ -167,7 +168,14 @@ impl Generated {
         let truth = (heading_in_partial(&p.sample.spec) + p.turn).rem_euclid(360.0);
         let protocol = p.sample.spec.protocol();
         for (name, mode) in MODES {
-            let found = orient(&p.rotated, UpAxis::Y, mode, Some(orienter));
+            let found = orient(
+                &p.rotated,
+                UpAxis::Y,
+                mode,
+                Some(orienter),
+                &OrientParams::default(),
+                &SymmetryParams::default(),
+            );
             let heading = found.heading.unwrap_or(f64::NAN);
             let unrefined = heading - found.refinement.unwrap_or(0.0);
             for (name, e) in [
@@ -298,7 +306,15 @@ fn real_turned(files: &[PathBuf], completer: &Completer, rng: &mut Lcg) -> Resul
     for path in files {
         let cloud = read_cloud(path, None)?.cloud;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-        let heading = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(orienter)).heading;
+        let heading = orient(
+            &cloud,
+            UpAxis::Y,
+            OrientMode::Auto,
+            Some(orienter),
+            &OrientParams::default(),
+            &SymmetryParams::default(),
+        )
+        .heading;
         let plain = completed(completer, &cloud, OrientMode::Auto)?;
         // The scans are only roughly in the canonical pose (heading 90°), so the turned
         // scans' headings are checked against the scan's own estimate, turned.
@@ -311,7 +327,15 @@ fn real_turned(files: &[PathBuf], completer: &Completer, rng: &mut Lcg) -> Resul
         for _ in 0..5 {
             let turn = rng.range(-180.0, 180.0);
             let rotated = turned(&cloud, turn, pivot);
-            let found = orient(&rotated, UpAxis::Y, OrientMode::Auto, Some(orienter)).heading;
+            let found = orient(
+                &rotated,
+                UpAxis::Y,
+                OrientMode::Auto,
+                Some(orienter),
+                &OrientParams::default(),
+                &SymmetryParams::default(),
+            )
+            .heading;
             let e = angle_between(found.unwrap_or(f64::NAN), own + turn);
             mls_errors.push(e);
             let done = completed(completer, &rotated, OrientMode::Auto)?;
@@ -347,16 +371,37 @@ fn real_cluttered(files: &[PathBuf], orienter: &Orienter, rng: &mut Lcg) -> Resu
     for path in files {
         let cloud = read_cloud(path, None)?.cloud;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-        let own = orient(&cloud, UpAxis::Y, OrientMode::Auto, Some(orienter))
-            .heading
-            .unwrap_or(90.0);
+        let own = orient(
+            &cloud,
+            UpAxis::Y,
+            OrientMode::Auto,
+            Some(orienter),
+            &OrientParams::default(),
+            &SymmetryParams::default(),
+        )
+        .heading
+        .unwrap_or(90.0);
         for _ in 0..5 {
             let turn = rng.range(-180.0, 180.0);
             let rotated = turned(&cloud, turn, pivot);
             let (cluttered, added) = clutter(&rotated, rng);
-            let raw = orient(&cluttered, UpAxis::Y, OrientMode::Auto, Some(orienter));
-            let (cleaned, report) = clean(&cluttered, UpAxis::Y);
-            let after = orient(&cleaned, UpAxis::Y, OrientMode::Auto, Some(orienter));
+            let raw = orient(
+                &cluttered,
+                UpAxis::Y,
+                OrientMode::Auto,
+                Some(orienter),
+                &OrientParams::default(),
+                &SymmetryParams::default(),
+            );
+            let (cleaned, report) = clean(&cluttered, UpAxis::Y, &CleanParams::default());
+            let after = orient(
+                &cleaned,
+                UpAxis::Y,
+                OrientMode::Auto,
+                Some(orienter),
+                &OrientParams::default(),
+                &SymmetryParams::default(),
+            );
             let (e_raw, e_clean) = [raw, after]
                 .map(|o| angle_between(o.heading.unwrap_or(f64::NAN), own + turn))
                 .into();

@@ -1787,3 +1787,66 @@ fn negative_values_are_answered_by_the_options_checks() {
         .assert()
         .success();
 }
+
+/// The heuristics' tunables are printed with today's values, a file changes the ones it names,
+/// and a file naming no tunable is refused in one line before any work.
+#[test]
+fn tuning_files_change_the_named_tunables_and_unknown_names_are_refused() {
+    let printed = mvpcc()
+        .args(["complete", "--print-tuning"])
+        .assert()
+        .success();
+    let defaults: serde_json::Value = serde_json::from_slice(&printed.get_output().stdout).unwrap();
+    assert_eq!(defaults["symmetry"]["max_width"], 0.55);
+    assert_eq!(defaults["orient"]["flank_band"], 0.003);
+    assert_eq!(defaults["clean"]["keep_share"], 0.25);
+
+    let dir = TempDir::new().unwrap();
+    let never = dir.path().join("no-wheel-line.json");
+    std::fs::write(&never, r#"{"orient": {"wheelbase": 2.0}}"#).unwrap();
+    let printed = mvpcc()
+        .args(["complete", "--print-tuning", "--tuning", s(&never)])
+        .assert()
+        .success();
+    let tuned: serde_json::Value = serde_json::from_slice(&printed.get_output().stdout).unwrap();
+    assert_eq!(tuned["orient"]["wheelbase"], 2.0);
+    assert_eq!(tuned["orient"]["top"], defaults["orient"]["top"]);
+
+    // A drive-by scan's heading is turned onto its wheels' line; a file by which the ground
+    // points must span twice the car's length finds no such line.
+    let input = write(
+        &dir,
+        "car.ply",
+        &shapes::scanned_side(&shapes::car(20_000, 5)),
+    );
+    let refined_by = |tuning: Option<&Path>| {
+        let out = dir.path().join("out.ply");
+        let mut command = mvpcc();
+        command.args([
+            "complete",
+            s(&input),
+            s(&out),
+            "--method",
+            "mirror",
+            "--json",
+        ]);
+        if let Some(path) = tuning {
+            command.args(["--tuning", s(path)]);
+        }
+        let done = command.assert().success();
+        let report: serde_json::Value = serde_json::from_slice(&done.get_output().stdout).unwrap();
+        report["orientation"]["refined_by"].clone()
+    };
+    assert_eq!(refined_by(None), "wheels");
+    assert_ne!(refined_by(Some(&never)), "wheels");
+
+    let typo = dir.path().join("typo.json");
+    std::fs::write(&typo, r#"{"symmetry": {"max_widht": 0.5}}"#).unwrap();
+    let refused = dir.path().join("refused.ply");
+    fails(
+        &["complete", s(&input), s(&refused), "--tuning", s(&typo)],
+        "typo.json",
+        "max_widht",
+        &refused,
+    );
+}

@@ -232,11 +232,11 @@ impl std::fmt::Display for ViewList {
 #[derive(Debug, Args)]
 pub struct CompleteArgs {
     /// Partial cloud (PLY, PCD, LAS/LAZ, XYZ; `-`: standard input).
-    #[arg(required_unless_present_any = ["input_dir", "list"], conflicts_with_all = ["input_dir", "list"])]
+    #[arg(required_unless_present_any = ["input_dir", "list", "print_tuning"], conflicts_with_all = ["input_dir", "list"])]
     pub input: Option<PathBuf>,
     /// Completed cloud; its extension picks the format (the input's format when it names none;
     /// `-`: standard output).
-    #[arg(required_unless_present_any = ["input_dir", "list"])]
+    #[arg(required_unless_present_any = ["input_dir", "list", "print_tuning"])]
     pub output: Option<PathBuf>,
     /// Complete every cloud file under this directory (recursively; hidden files skipped, each
     /// file once however many links lead to it).
@@ -350,6 +350,14 @@ pub struct CompleteArgs {
         conflicts_with = "paper"
     )]
     pub vehicle_width: Option<f64>,
+    /// A JSON file of the heuristics' tunables to change (`{"orient": {"flank_band": 0.004}}`;
+    /// the names and today's values: `mvpcc complete --print-tuning`), for experiments.
+    #[arg(long, value_name = "FILE", conflicts_with = "paper")]
+    pub tuning: Option<PathBuf>,
+    /// Print the heuristics' tunables with their values as JSON (with --tuning, as that file
+    /// sets them) and exit.
+    #[arg(long, conflicts_with_all = ["input", "output", "input_dir", "list"])]
+    pub print_tuning: bool,
     /// Erosion element side for the inpainted views (pixels, odd); 0 = off. A model that keeps
     /// its input's pixels (the built-in one) has them spared.
     #[arg(long, default_value_t = Options::default().erode, value_parser = window_side)]

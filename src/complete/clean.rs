@@ -7,30 +7,55 @@ use crate::complete::orient::upright_points;
 use crate::core::cloud::{Aabb, PointCloud};
 use crate::core::frame::UpAxis;
 use crate::core::knn::KnnIndex;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
-/// Ground candidates lie this far (share of the longest side) above the lowest point.
-const GROUND_BAND: f64 = 0.04;
-/// Points this close to the fitted ground plane, or below it, are ground.
-const GROUND_DISTANCE: f64 = 0.012;
-/// A plane steeper than this is no ground.
-const GROUND_SLOPE: f64 = 0.15;
-/// Ground covers at least this share of the footprint grid's cells (wheels' contact patches
-/// cover a few).
-const GROUND_COVER: f64 = 0.12;
-const GRID: usize = 20;
-/// Neighbour used for the spacing of a point.
-const SPACING_NEIGHBOUR: usize = 4;
-/// A point whose neighbour spacing exceeds this multiple of the median is isolated.
-const ISOLATED: f64 = 6.0;
-/// Points join one object when within this multiple of the median spacing, or this share of
-/// the longest side, whichever is larger. 12 is the middle of the reach a plain voxel grid of 8
-/// had (lab/2026-12-06-clean-clutter): 8 parted sparse cars.
-const LINK_SPACINGS: f64 = 12.0;
-const LINK_SHARE: f64 = 0.02;
-/// Another component is kept when it has this share of the largest one's points.
-const KEEP_SHARE: f64 = 0.25;
+/// The tunables of cleaning; sizes are shares of the cloud's longest side. A file may give some
+/// of them (`complete --tuning`); the rest keep these defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CleanParams {
+    /// Ground candidates lie this far above the lowest point.
+    pub ground_band: f64,
+    /// Points this close to the fitted ground plane, or below it, are ground.
+    pub ground_distance: f64,
+    /// A plane steeper than this (rise over run) is no ground.
+    pub ground_slope: f64,
+    /// Ground covers at least this share of the footprint grid's cells (wheels' contact
+    /// patches cover a few).
+    pub ground_cover: f64,
+    /// Cells along each side of the footprint grid the ground cover is counted on.
+    pub grid: usize,
+    /// The neighbour whose distance is a point's spacing.
+    pub spacing_neighbour: usize,
+    /// A point whose spacing exceeds this multiple of the median is isolated.
+    pub isolated: f64,
+    /// Points join one object within this multiple of the median spacing, or `link_share` of
+    /// the longest side, whichever is larger.
+    pub link_spacings: f64,
+    pub link_share: f64,
+    /// Another object is kept when it has this share of the largest one's points.
+    pub keep_share: f64,
+}
+
+impl Default for CleanParams {
+    fn default() -> Self {
+        CleanParams {
+            ground_band: 0.04,
+            ground_distance: 0.012,
+            ground_slope: 0.15,
+            ground_cover: 0.12,
+            grid: 20,
+            spacing_neighbour: 4,
+            isolated: 6.0,
+            // The middle of the reach a plain voxel grid of 8 had, which parted sparse cars
+            // (lab/2026-12-06-clean-clutter).
+            link_spacings: 12.0,
+            link_share: 0.02,
+            keep_share: 0.25,
+        }
+    }
+}
 
 /// How many points each step removed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -47,7 +72,7 @@ impl CleanReport {
 }
 
 /// The cloud without its ground, isolated points and other objects.
-pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
+pub fn clean(cloud: &PointCloud, up: UpAxis, tune: &CleanParams) -> (PointCloud, CleanReport) {
     let mut report = CleanReport::default();
     if cloud.len() < 10 {
         return (cloud.clone(), report);
@@ -58,7 +83,7 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
     // Isolated points first: one stray return below the wheels or far to the side would
     // otherwise set the ground band and the sizes.
     let index = KnnIndex::new(&points);
-    let k = SPACING_NEIGHBOUR + 1;
+    let k = tune.spacing_neighbour + 1;
     let spacing: Vec<f64> = index
         .k_nearest_distances(&points, k)
         .chunks(k)
@@ -66,7 +91,7 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
         .collect();
     let median = median(&spacing);
     for (k, &s) in keep.iter_mut().zip(&spacing) {
-        if s > ISOLATED * median {
+        if s > tune.isolated * median {
             *k = false;
             report.isolated += 1;
         }
@@ -75,7 +100,7 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
     let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
     let subset: Vec<[f64; 3]> = remaining.iter().map(|&i| points[i]).collect();
     let extent = Aabb::of(&subset).map_or(0.0, |b| b.longest_side());
-    if let Some(ground) = ground_points(&subset, extent) {
+    if let Some(ground) = ground_points(&subset, extent, tune) {
         for (&i, g) in remaining.iter().zip(&ground) {
             if *g {
                 keep[i] = false;
@@ -85,8 +110,8 @@ pub fn clean(cloud: &PointCloud, up: UpAxis) -> (PointCloud, CleanReport) {
     }
 
     let remaining: Vec<usize> = (0..points.len()).filter(|&i| keep[i]).collect();
-    let link = (LINK_SPACINGS * median).max(LINK_SHARE * extent);
-    for i in other_objects(&points, &remaining, link) {
+    let link = (tune.link_spacings * median).max(tune.link_share * extent);
+    for i in other_objects(&points, &remaining, link, tune.keep_share) {
         keep[i] = false;
         report.other_objects += 1;
     }
@@ -104,21 +129,21 @@ fn median(values: &[f64]) -> f64 {
 
 /// Which points are ground: a plane `y = a·x + b·z + c` fitted (least squares, twice trimmed)
 /// to the lowest band, accepted when nearly level and spread under much of the footprint.
-fn ground_points(points: &[[f64; 3]], extent: f64) -> Option<Vec<bool>> {
+fn ground_points(points: &[[f64; 3]], extent: f64, tune: &CleanParams) -> Option<Vec<bool>> {
     let lowest = points.iter().map(|p| p[1]).fold(f64::MAX, f64::min);
     let mut band: Vec<[f64; 3]> = points
         .iter()
         .copied()
-        .filter(|p| p[1] < lowest + GROUND_BAND * extent)
+        .filter(|p| p[1] < lowest + tune.ground_band * extent)
         .collect();
     let mut plane = None;
     for _ in 0..3 {
         let fitted = fit_plane(&band)?;
-        band.retain(|p| (p[1] - height(fitted, p)).abs() < GROUND_DISTANCE * extent / 2.0);
+        band.retain(|p| (p[1] - height(fitted, p)).abs() < tune.ground_distance * extent / 2.0);
         plane = Some(fitted);
     }
     let plane = plane?;
-    if plane[0].abs() > GROUND_SLOPE || plane[1].abs() > GROUND_SLOPE || band.len() < 10 {
+    if plane[0].abs() > tune.ground_slope || plane[1].abs() > tune.ground_slope || band.len() < 10 {
         return None;
     }
     let (lo, hi) = points
@@ -130,21 +155,21 @@ fn ground_points(points: &[[f64; 3]], extent: f64) -> Option<Vec<bool>> {
             )
         });
     let cell = |v: f64, i: usize| {
-        (((v - lo[i]) / (hi[i] - lo[i]).max(f64::MIN_POSITIVE) * GRID as f64) as usize)
-            .min(GRID - 1)
+        (((v - lo[i]) / (hi[i] - lo[i]).max(f64::MIN_POSITIVE) * tune.grid as f64) as usize)
+            .min(tune.grid - 1)
     };
-    let mut covered = vec![false; GRID * GRID];
+    let mut covered = vec![false; tune.grid * tune.grid];
     for p in &band {
-        covered[cell(p[0], 0) * GRID + cell(p[2], 1)] = true;
+        covered[cell(p[0], 0) * tune.grid + cell(p[2], 1)] = true;
     }
-    let cover = covered.iter().filter(|&&c| c).count() as f64 / (GRID * GRID) as f64;
-    if cover < GROUND_COVER {
+    let cover = covered.iter().filter(|&&c| c).count() as f64 / (tune.grid * tune.grid) as f64;
+    if cover < tune.ground_cover {
         return None;
     }
     Some(
         points
             .iter()
-            .map(|p| p[1] - height(plane, p) < GROUND_DISTANCE * extent)
+            .map(|p| p[1] - height(plane, p) < tune.ground_distance * extent)
             .collect(),
     )
 }
@@ -178,7 +203,12 @@ fn fit_plane(points: &[[f64; 3]]) -> Option<[f64; 3]> {
 /// a point of each lies within `link` of the other, so that how far apart two objects may stand
 /// and still join does not hang on where the grid falls (neighbouring voxels alone join points
 /// from one to two `link` apart along an axis).
-fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<usize> {
+fn other_objects(
+    points: &[[f64; 3]],
+    candidates: &[usize],
+    link: f64,
+    keep_share: f64,
+) -> Vec<usize> {
     if candidates.is_empty() || link <= 0.0 {
         return Vec::new();
     }
@@ -228,7 +258,7 @@ fn other_objects(points: &[[f64; 3]], candidates: &[usize], link: f64) -> Vec<us
     candidates
         .iter()
         .zip(&component)
-        .filter(|(_, c)| (sizes[c] as f64) < KEEP_SHARE * largest as f64)
+        .filter(|(_, c)| (sizes[c] as f64) < keep_share * largest as f64)
         .map(|(&i, _)| i)
         .collect()
 }
@@ -288,7 +318,7 @@ mod tests {
     #[test]
     fn ground_noise_and_neighbours_are_removed_and_the_car_kept() {
         let (cloud, car, [ground, noise, other]) = scene();
-        let (cleaned, report) = clean(&cloud, UpAxis::Z);
+        let (cleaned, report) = clean(&cloud, UpAxis::Z, &CleanParams::default());
         assert_eq!(report.ground, ground, "{report:?}");
         assert_eq!(report.isolated, noise, "{report:?}");
         assert_eq!(report.other_objects, other, "{report:?}");
@@ -311,13 +341,13 @@ mod tests {
             let apart = two_walls(shift, 1.5 * link);
             let all: Vec<usize> = (0..apart.len()).collect();
             assert_eq!(
-                other_objects(&apart, &all, link),
+                other_objects(&apart, &all, link, CleanParams::default().keep_share),
                 (1600..1700).collect::<Vec<_>>(),
                 "shift {shift}"
             );
             let close = two_walls(shift, 0.9 * link);
             assert!(
-                other_objects(&close, &all, link).is_empty(),
+                other_objects(&close, &all, link, CleanParams::default().keep_share).is_empty(),
                 "shift {shift}"
             );
         }
@@ -326,7 +356,7 @@ mod tests {
     #[test]
     fn a_clean_car_loses_nothing() {
         let cloud = PointCloud::from_positions(car_block(75.0, [3.0, 0.3, -2.0]));
-        let (cleaned, report) = clean(&cloud, UpAxis::Y);
+        let (cleaned, report) = clean(&cloud, UpAxis::Y, &CleanParams::default());
         assert_eq!(report, CleanReport::default());
         assert_eq!(cleaned.len(), cloud.len());
     }

@@ -19,11 +19,11 @@ pub mod symmetry;
 pub mod thin;
 pub mod upright;
 
-use crate::complete::clean::{clean, CleanReport};
+use crate::complete::clean::{clean, CleanParams, CleanReport};
 use crate::complete::filter::SorParams;
 use crate::complete::network::{run_network, NetworkOutput};
-use crate::complete::orient::{orient, OrientMode, Orientation, Orienter};
-use crate::complete::symmetry::{find_plane, find_roll, mirror, Plane};
+use crate::complete::orient::{orient, OrientMode, OrientParams, Orientation, Orienter};
+use crate::complete::symmetry::{find_plane, find_roll, mirror, Plane, SymmetryParams};
 use crate::core::camera::CameraError;
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
@@ -36,7 +36,7 @@ use crate::views::projection::ViewImages;
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -158,6 +158,8 @@ pub struct Options {
     /// The vehicle's width in the input's units, when the user knows it: the plane of a scan
     /// of one side is then kept at least half of it from the scanned flank (see [`find_plane`]).
     pub vehicle_width: Option<f64>,
+    /// The heuristics' tunables.
+    pub tuning: Tuning,
 }
 
 impl Options {
@@ -204,7 +206,48 @@ impl Default for Options {
             symmetric_frame: true,
             keep_views: false,
             vehicle_width: None,
+            tuning: Tuning::default(),
         }
+    }
+}
+
+/// The tunables of the pipeline's heuristics, stage by stage, today's values as their
+/// defaults. A JSON file may give any of them (`complete --tuning FILE`); the lab harness
+/// sweeps them over the validation sets.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Tuning {
+    pub clean: CleanParams,
+    pub orient: OrientParams,
+    pub symmetry: SymmetryParams,
+}
+
+/// Why a tuning file could not be used.
+#[derive(Debug, Error)]
+pub enum TuningError {
+    #[error("{}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: not a tuning file: {source}", path.display())]
+    Parse {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+}
+
+impl Tuning {
+    /// The tunables a JSON file gives, today's values for the rest; an unknown name is refused.
+    pub fn read(path: &Path) -> Result<Tuning, TuningError> {
+        let text = std::fs::read_to_string(path).map_err(|source| TuningError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|source| TuningError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })
     }
 }
 
@@ -483,11 +526,20 @@ impl Completer {
     pub fn run(&self, cloud: &PointCloud, settings: &Settings) -> Result<Run, CompleteError> {
         let up = settings.options.up;
         let start = Instant::now();
-        let cleaned = settings.clean.then(|| clean(cloud, up));
+        let tuning = &settings.options.tuning;
+        let cleaned = settings.clean.then(|| clean(cloud, up, &tuning.clean));
         let clean_time = start.elapsed();
         let input = cleaned.as_ref().map_or(cloud, |(c, _)| c);
         let start = Instant::now();
-        let orientation = orient(input, up, settings.orient, self.orienter.as_ref());
+        let orienter = self.orienter.as_ref();
+        let orientation = orient(
+            input,
+            up,
+            settings.orient,
+            orienter,
+            &tuning.orient,
+            &tuning.symmetry,
+        );
         let orient_time = start.elapsed();
         let options = Options {
             heading: orientation.heading,
@@ -728,7 +780,7 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
     };
     let roll = match options.roll {
         Roll::Given(roll) => roll,
-        Roll::Auto => find_roll(&normalized(&posed)).unwrap_or(0.0),
+        Roll::Auto => find_roll(&normalized(&posed), &options.tuning.symmetry).unwrap_or(0.0),
     };
     let fitted = if roll == 0.0 {
         posed
@@ -741,7 +793,7 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
         || (options.method == Method::Network && options.symmetry);
     let width = options.vehicle_width.map(|w| w / fitted.extent);
     let plane = wants_plane
-        .then(|| find_plane(&fitted_points, width))
+        .then(|| find_plane(&fitted_points, width, &options.tuning.symmetry))
         .flatten();
     let frame = if options.symmetric_frame {
         symmetric_frame(&fitted, &fitted_points, plane)

@@ -11,35 +11,144 @@ use crate::core::cloud::Aabb;
 use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// The normal of the planes `x = c`.
 const ACROSS: [f64; 3] = [1.0, 0.0, 0.0];
 
-/// Points used to find the plane; a stride over the cloud keeps the search ~1 ms a candidate.
-const SAMPLE: usize = 4000;
-/// A point within this distance (normalized units) of a candidate plane does not vote for it.
-const MIN_LEVER: f64 = 0.03;
-/// ... nor, in [`find_plane`], within this share of the cloud's width: a train is 0.07 of its
-/// length wide, so 0.03 left only its flank and roof edges to vote and 4 of the 40 validation
-/// train partials had no plane. Chosen on the validation split among 0.1, 0.2, 0.25, 0.3, 0.4
-/// and none (lab/2026-12-02-plane-heading-cues).
-const LEVER_OF_WIDTH: f64 = 0.3;
-/// A mirrored point counts as matched within this distance of a measured one, or within 1.5
-/// point spacings of a sparser cloud.
-const MATCH: f64 = 0.01;
-/// Below this fraction of matched points the best-supported plane says little (see
-/// [`find_plane`]).
-const MIN_SCORE: f64 = 0.05;
-/// Most Gauss–Newton rounds of [`Sample::refine_offset`]; it settles in fewer.
-const ICP_ROUNDS: usize = 20;
-/// Neighbours a point's normal is fitted to.
-const NORMAL_NEIGHBOURS: usize = 12;
-/// A point whose neighbours' centroid lies more than this many RMS neighbour distances from it is
-/// on the edge of what was seen. Mirror pairs ending there are where the overlap of a one-sided
-/// scan with its mirror image ends, and they pull the plane towards whatever overlap it already
-/// has, so the ICP leaves them out (as mesh zippering leaves out boundary pairs). Chosen on the
-/// validation split among 0.3, 0.4, 0.5, 0.8 and none (lab/2026-12-01-plane-pairs-slices).
-const EDGE_OFFSET: f64 = 0.4;
+/// The tunables of the symmetry plane, the heading's symmetry refinement and the roll; lengths
+/// are in the unit box unless said. A file may give some of them (`complete --tuning`); the rest
+/// keep these defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SymmetryParams {
+    /// Points used to find the plane; a stride over the cloud keeps the search ~1 ms a candidate.
+    pub sample: usize,
+    /// A point within this distance (normalized units) of a candidate plane does not vote for it.
+    pub min_lever: f64,
+    /// ... nor, in [`find_plane`], within this share of the cloud's width: a train is 0.07 of its
+    /// length wide, so 0.03 left only its flank and roof edges to vote and 4 of the 40 validation
+    /// train partials had no plane. Chosen on the validation split among 0.1, 0.2, 0.25, 0.3, 0.4
+    /// and none (lab/2026-12-02-plane-heading-cues).
+    pub lever_of_width: f64,
+    /// A mirrored point counts as matched within this distance of a measured one, or within 1.5
+    /// point spacings of a sparser cloud.
+    pub match_distance: f64,
+    /// Below this fraction of matched points the best-supported plane says little (see
+    /// [`find_plane`]).
+    pub min_score: f64,
+    /// Most Gauss–Newton rounds of `Sample::refine_offset`; it settles in fewer.
+    pub icp_rounds: usize,
+    /// Neighbours a point's normal is fitted to.
+    pub normal_neighbours: usize,
+    /// A point whose neighbours' centroid lies more than this many RMS neighbour distances from it is
+    /// on the edge of what was seen. Mirror pairs ending there are where the overlap of a one-sided
+    /// scan with its mirror image ends, and they pull the plane towards whatever overlap it already
+    /// has, so the ICP leaves them out (as mesh zippering leaves out boundary pairs). Chosen on the
+    /// validation split among 0.3, 0.4, 0.5, 0.8 and none (lab/2026-12-01-plane-pairs-slices).
+    pub edge_offset: f64,
+    /// The widest a road vehicle is for its length, wing mirrors included: cars are 0.38–0.47 of
+    /// their length wide without them (real scans, generated and third-party meshes), the widest
+    /// generated car with them 0.53; the frame makes the length the longer horizontal side.
+    pub max_width: f64,
+    /// Height of the slices `held_back` bounds the plane in, over the object's length.
+    pub slice_height: f64,
+    /// Points a slice needs to bound the plane.
+    pub slice_points: usize,
+    /// A slice bounds the plane only when it spans at least this fraction of the cloud's width, so
+    /// that both sides of the vehicle are seen in it.
+    pub slice_span: f64,
+    /// How near a measured point the mirror image of a slice's far extreme must land (see
+    /// `paired`). Chosen on the validation split among 0.01, 0.02, 0.025, 0.03, 0.035, 0.04,
+    /// 0.05 and none (lab/2026-12-01-plane-pairs-slices).
+    pub paired: f64,
+    /// Two x values of a slice closer than this are one return position of the scan lines, apart
+    /// only by range noise (the generated scans' noise is at most 0.002).
+    pub distinct: f64,
+    /// The far extreme's return spacing is believed up to this; a wider gap is more likely a gap
+    /// in the surface than in the sampling.
+    pub max_spacing: f64,
+    /// Where the far edge is taken to lie beyond the far extreme, in return spacings: the last
+    /// return falls anywhere within one spacing short of the edge, so half a spacing on average.
+    /// With `max_spacing`, chosen on the validation split (lab/2026-12-01-plane-pairs-slices).
+    pub far_edge: f64,
+    /// The slices bound the plane only when at least this share of the points lies on the better
+    /// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
+    /// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and one
+    /// such slice moved planes found to within 0.01 % by several percent. Chosen on the validation
+    /// split among 0, 0.6, 0.65, 0.7, 0.75, 0.8 and 0.85 (lab/2026-12-01-plane-pairs-slices).
+    pub one_sided: f64,
+    /// Points a tyre track needs in `between_the_tracks`: a side view at the vehicle's height
+    /// sees the far tyres' inner faces through the gap under the body, often only a few points of
+    /// them in the ground band. Chosen on the validation splits among 2, 3, 5 and 10
+    /// (lab/2026-12-06-plane-tyres).
+    pub track_points: usize,
+    /// The gap between the two tracks spans at least this share of the cloud's width ...
+    pub track_gap: f64,
+    /// ... and this share of its length: the generated road vehicles' tracks lie 0.097 (long
+    /// buses) to about 0.28 (cars) of their length apart, a train's wheels 0.05–0.07 under its body,
+    /// where they show their outer faces and not their treads, so their gap's middle lies beyond
+    /// the plane (a validation train went from 0.06 % to 0.49 % of its length off;
+    /// lab/2026-12-06-plane-tyres).
+    pub track_apart: f64,
+    /// A near track at least this wide across (share of the length) shows its tyres' treads edge
+    /// to edge, as a camera beside the vehicle at its height sees them, and then the gap's middle
+    /// also overrules a plane the pairs alone placed beyond it, away from the scanned side; from
+    /// above, a scanner sees the near tyres' side walls and not their treads' inner edges. Chosen
+    /// on the validation splits among 0.01, 0.015, 0.02, 0.025 and 0.03 (lab/2026-12-06-plane-tyres).
+    pub treads_seen: f64,
+    /// `with_width` trusts the scanned flank to be seen at its widest only where it lies at least
+    /// this share of the half-width from the plane found: a motorcycle seen without its near
+    /// handlebar had its plane moved by 10 % of its length. Chosen on two validation splits among
+    /// 0, 0.8 and 0.9 (lab/2026-12-03-plane-known-width).
+    pub flank_seen: f64,
+    /// Points the heading refinement looks at: it scores ~230 planes, and measured on generated
+    /// partials 2,000 points find the heading as well as 4,000 (median 0.22° vs 0.18°, p95 3.0° vs
+    /// 3.2°) in 20 % less time.
+    pub refine_sample: usize,
+    /// Most a heading is turned by [`refine_heading`], degrees.
+    pub max_turn: f64,
+    /// Most a cloud is found rolled by [`find_roll`], degrees: a road's crossfall is 2–3 % (about
+    /// 1.5°), a wheel on a kerb a few degrees more.
+    pub max_roll: f64,
+    /// Support (the share of points mirrored onto others) the upright plane needs before a roll
+    /// is looked for: one-sided scans pair too few points to tell a roll from the plane's offset,
+    /// and on upright ones the roll found then scatters by degrees (lab/2026-12-05-roll).
+    pub min_roll_support: f64,
+}
+
+impl Default for SymmetryParams {
+    fn default() -> Self {
+        SymmetryParams {
+            sample: 4000,
+            min_lever: 0.03,
+            lever_of_width: 0.3,
+            match_distance: 0.01,
+            min_score: 0.05,
+            icp_rounds: 20,
+            normal_neighbours: 12,
+            edge_offset: 0.4,
+            max_width: 0.55,
+            slice_height: 0.01,
+            slice_points: 20,
+            slice_span: 0.5,
+            paired: 0.035,
+            distinct: 0.002,
+            max_spacing: 0.015,
+            far_edge: 0.5,
+            one_sided: 0.75,
+            track_points: 3,
+            track_gap: 0.5,
+            track_apart: 0.08,
+            treads_seen: 0.02,
+            flank_seen: 0.8,
+            refine_sample: 2000,
+            max_turn: 8.0,
+            max_roll: 4.0,
+            min_roll_support: 0.3,
+        }
+    }
+}
 
 /// The symmetry plane found, and how much of the cloud supports it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,12 +250,17 @@ pub enum PlaneFit {
 /// vehicle's `width` (normalized units), a scan of one side has its plane kept at least half of it
 /// from the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show
 /// any symmetry (for example, one flat side) and no width places a plane.
-pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
+pub fn find_plane(points: &[[f64; 3]], width: Option<f64>, tune: &SymmetryParams) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
     let across = bounds.max[0] - bounds.min[0];
-    let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across))?;
+    let sample = Sample::of(
+        points,
+        tune.sample,
+        tune.min_lever.min(tune.lever_of_width * across),
+        tune,
+    )?;
     let (best, support) = sample.best_offset(ACROSS);
-    let supported = support >= MIN_SCORE;
+    let supported = support >= tune.min_score;
     let start = if supported { best } else { bounds.center()[0] };
     let normals = sample.normals();
     // Without the edges' pairs first; where only edges pair (a flank and a roof strip of some
@@ -154,7 +268,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let pulled = sample
         .refine_offset(start, &normals, true)
         .or_else(|| sample.refine_offset(start, &normals, false));
-    let seen = Seen::of(points, &bounds);
+    let seen = Seen::of(points, &bounds, tune);
     let found = match pulled {
         Some(c) if supported => Some((c, PlaneFit::Refined)),
         Some(c) => Some((c, PlaneFit::Pairs)),
@@ -162,7 +276,7 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         None => None,
     }
     .map(|(refined, fit)| {
-        let offset = held_back(points, &bounds, &seen, refined);
+        let offset = held_back(points, &bounds, &seen, refined, tune);
         let fit = if offset == refined {
             fit
         } else {
@@ -170,9 +284,9 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         };
         sample.plane(offset, fit)
     });
-    let found = to_the_tyres(points, &bounds, &seen, &sample, found);
+    let found = to_the_tyres(points, &bounds, &seen, &sample, found, tune);
     let found = match width {
-        Some(width) => with_width(points, &seen, &sample, width, found),
+        Some(width) => with_width(points, &seen, &sample, width, found, tune),
         None => found,
     };
     // A one-sided cloud's slices are already cut; the others' are cut here, once.
@@ -180,19 +294,19 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
     let slices: &[Vec<usize>] = if seen.one_sided {
         &seen.slices
     } else {
-        cut = horizontal_slices(points, &bounds);
+        cut = horizontal_slices(points, &bounds, tune);
         &cut
     };
     let cues = Cues {
         pairs: pulled.or(supported.then_some(best)),
         extent: if seen.one_sided {
-            slices_middle(points, &bounds, slices, seen.side)
+            slices_middle(points, &bounds, slices, seen.side, tune)
         } else {
             Some(bounds.center()[0])
         },
-        tyres: between_the_tracks(points, &bounds, seen.side).map(|t| t.middle),
+        tyres: between_the_tracks(points, &bounds, seen.side, tune).map(|t| t.middle),
         width: width.and_then(|w| {
-            let flank = scanned_flank(points, slices, seen.side)?;
+            let flank = scanned_flank(points, slices, seen.side, tune)?;
             Some(seen.side * (flank - w / 2.0))
         }),
     };
@@ -202,15 +316,10 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>) -> Option<Plane> {
         both_sides,
         ..p
     });
-    in_proportion(points, &bounds, slices, &sample, cues.extent, found)
+    in_proportion(points, &bounds, slices, &sample, cues.extent, found, tune)
 }
 
-/// The widest a road vehicle is for its length, wing mirrors included: cars are 0.38–0.47 of
-/// their length wide without them (real scans, generated and third-party meshes), the widest
-/// generated car with them 0.53; the frame makes the length the longer horizontal side.
-const MAX_WIDTH: f64 = 0.55;
-
-/// Step 5 of [`find_plane`]: on a scan no wider than [`MAX_WIDTH`] of its length, a plane that
+/// Step 5 of [`find_plane`]: on a scan no wider than [`SymmetryParams::max_width`] of its length, a plane that
 /// would put either flank's mirror image more than that from the other flank is no vehicle's,
 /// so it goes to the middle
 /// of the scan's own extent (`extent`, [`slices_middle`]; of the whole box where there is
@@ -223,19 +332,20 @@ fn in_proportion(
     sample: &Sample,
     extent: Option<f64>,
     found: Option<Plane>,
+    tune: &SymmetryParams,
 ) -> Option<Plane> {
     let plane = found?;
     let length = bounds.max[2] - bounds.min[2];
     // A scan already wider than that is no road vehicle seen along its length (or its heading
     // is off), and the proportions say nothing of it.
-    if bounds.max[0] - bounds.min[0] > MAX_WIDTH * length {
+    if bounds.max[0] - bounds.min[0] > tune.max_width * length {
         return Some(plane);
     }
     let widest = [-1.0, 1.0]
         .into_iter()
-        .filter_map(|side| Some(scanned_flank(points, slices, side)? - side * plane.offset))
+        .filter_map(|side| Some(scanned_flank(points, slices, side, tune)? - side * plane.offset))
         .fold(0.0, f64::max);
-    if 2.0 * widest <= MAX_WIDTH * length {
+    if 2.0 * widest <= tune.max_width * length {
         return Some(plane);
     }
     let middle = extent.unwrap_or_else(|| bounds.center()[0]);
@@ -258,17 +368,18 @@ fn to_the_tyres(
     seen: &Seen,
     sample: &Sample,
     found: Option<Plane>,
+    tune: &SymmetryParams,
 ) -> Option<Plane> {
     let tracks = seen
         .one_sided
-        .then(|| between_the_tracks(points, bounds, seen.side))
+        .then(|| between_the_tracks(points, bounds, seen.side, tune))
         .flatten();
     match (found, tracks) {
         (Some(p), Some(t)) if (t.middle - p.offset) * seen.side < 0.0 => {
             Some(sample.plane(t.middle, PlaneFit::Tyres))
         }
-        (Some(p), Some(t)) if p.fit == PlaneFit::Pairs && t.near_width >= TREADS_SEEN => {
-            let offset = held_back(points, bounds, seen, t.middle);
+        (Some(p), Some(t)) if p.fit == PlaneFit::Pairs && t.near_width >= tune.treads_seen => {
+            let offset = held_back(points, bounds, seen, t.middle, tune);
             let fit = if offset == t.middle {
                 PlaneFit::Tyres
             } else {
@@ -281,37 +392,6 @@ fn to_the_tyres(
     }
 }
 
-/// Height of the slices [`held_back`] bounds the plane in, over the object's length.
-const SLICE_HEIGHT: f64 = 0.01;
-/// Points a slice needs to bound the plane.
-const SLICE_POINTS: usize = 20;
-/// A slice bounds the plane only when it spans at least this fraction of the cloud's width, so
-/// that both sides of the vehicle are seen in it.
-const SLICE_SPAN: f64 = 0.5;
-
-/// How near a measured point the mirror image of a slice's far extreme must land (see
-/// [`paired`]). Chosen on the validation split among 0.01, 0.02, 0.025, 0.03, 0.035, 0.04,
-/// 0.05 and none (lab/2026-12-01-plane-pairs-slices).
-const PAIRED: f64 = 0.035;
-
-/// Two x values of a slice closer than this are one return position of the scan lines, apart
-/// only by range noise (the generated scans' noise is at most 0.002).
-const DISTINCT: f64 = 0.002;
-/// The far extreme's return spacing is believed up to this; a wider gap is more likely a gap
-/// in the surface than in the sampling.
-const MAX_SPACING: f64 = 0.015;
-/// Where the far edge is taken to lie beyond the far extreme, in return spacings: the last
-/// return falls anywhere within one spacing short of the edge, so half a spacing on average.
-/// With [`MAX_SPACING`], chosen on the validation split (lab/2026-12-01-plane-pairs-slices).
-const FAR_EDGE: f64 = 0.5;
-
-/// The slices bound the plane only when at least this share of the points lies on the better
-/// scanned side of the middle of the width, as on a drive-by. Seen from several sides (camera
-/// partials, some motorcycles) a slice's near extent need not be the vehicle's width there, and one
-/// such slice moved planes found to within 0.01 % by several percent. Chosen on the validation
-/// split among 0, 0.6, 0.65, 0.7, 0.75, 0.8 and 0.85 (lab/2026-12-01-plane-pairs-slices).
-const ONE_SIDED: f64 = 0.75;
-
 /// The tightest bound on the plane from `scanned_side` (±1): the middle of each horizontal
 /// slice's x range, the one farthest from that side. In every slice the scanned side's
 /// outermost point is the vehicle's width there and the far side's is at most its width, so
@@ -322,7 +402,7 @@ const ONE_SIDED: f64 = 0.75;
 /// towards the scanner (median), the slices' 0.2 %. A slice counts only where its far
 /// extreme's mirror image lands on a measured point ([`paired`]). The far side is seen at a
 /// grazing angle, where the returns lie far apart, so the last one falls short of the edge:
-/// the chosen slice's far extreme is moved out by [`FAR_EDGE`] of the spacing between it and
+/// the chosen slice's far extreme is moved out by [`SymmetryParams::far_edge`] of the spacing between it and
 /// the next return position. `None` when no slice spans the width. `bounds` is the points'
 /// box, `slices` their [`horizontal_slices`].
 fn slices_middle(
@@ -330,18 +410,19 @@ fn slices_middle(
     bounds: &Aabb,
     slices: &[Vec<usize>],
     scanned_side: f64,
+    tune: &SymmetryParams,
 ) -> Option<f64> {
     let width = bounds.max[0] - bounds.min[0];
     let x = |i: &usize| points[*i][0];
     let (middle, slice, far) = slices
         .iter()
-        .filter(|m| m.len() >= SLICE_POINTS)
+        .filter(|m| m.len() >= tune.slice_points)
         .filter_map(|m| {
             let lo = m.iter().copied().min_by(|a, b| x(a).total_cmp(&x(b)))?;
             let hi = m.iter().copied().max_by(|a, b| x(a).total_cmp(&x(b)))?;
             let middle = (x(&lo) + x(&hi)) / 2.0;
             let far = if scanned_side > 0.0 { lo } else { hi };
-            (x(&hi) - x(&lo) >= SLICE_SPAN * width && paired(points, m, far, middle))
+            (x(&hi) - x(&lo) >= tune.slice_span * width && paired(points, m, far, middle, tune))
                 .then_some((middle, m, far))
         })
         .min_by(|a, b| (a.0 * scanned_side).total_cmp(&(b.0 * scanned_side)))?;
@@ -349,31 +430,43 @@ fn slices_middle(
     let spacing = slice
         .iter()
         .map(|i| (x(i) - x(&far)) * scanned_side)
-        .filter(|&d| d > DISTINCT)
-        .fold(MAX_SPACING, f64::min);
-    Some(middle - scanned_side * spacing * FAR_EDGE / 2.0)
+        .filter(|&d| d > tune.distinct)
+        .fold(tune.max_spacing, f64::min);
+    Some(middle - scanned_side * spacing * tune.far_edge / 2.0)
 }
 
-/// Whether the mirror image of point `far` about `x = middle` lands within [`PAIRED`] of one of
+/// Whether the mirror image of point `far` about `x = middle` lands within [`SymmetryParams::paired`] of one of
 /// the points `among`. A slice's far extreme that pairs with nothing on the scanned side, where
 /// its image would have been seen, is not the mirror of the near extreme: a part on one side
 /// only (a motorcycle's exhaust), so its slice says nothing about the plane.
-fn paired(points: &[[f64; 3]], among: &[usize], far: usize, middle: f64) -> bool {
+fn paired(
+    points: &[[f64; 3]],
+    among: &[usize],
+    far: usize,
+    middle: f64,
+    tune: &SymmetryParams,
+) -> bool {
     let image = mirror(points[far], middle);
     among.iter().any(|&i| {
         let d: f64 = (0..3).map(|k| (points[i][k] - image[k]).powi(2)).sum();
-        d <= PAIRED * PAIRED
+        d <= tune.paired * tune.paired
     })
 }
 
 /// The plane offset `c`, held back at the middle of the slice seen widest on both sides
 /// ([`slices_middle`]; of the points' whole x range when none is or the cloud is not seen from
-/// one side, [`ONE_SIDED`]) when it lies beyond it towards the better scanned side (see
+/// one side, [`SymmetryParams::one_sided`]) when it lies beyond it towards the better scanned side (see
 /// [`find_plane`]). `bounds` is the points' box, `seen` how they were seen in it.
-fn held_back(points: &[[f64; 3]], bounds: &Aabb, seen: &Seen, c: f64) -> f64 {
+fn held_back(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    seen: &Seen,
+    c: f64,
+    tune: &SymmetryParams,
+) -> f64 {
     let whole = bounds.center()[0];
     let middle = if seen.one_sided {
-        slices_middle(points, bounds, &seen.slices, seen.side).unwrap_or(whole)
+        slices_middle(points, bounds, &seen.slices, seen.side, tune).unwrap_or(whole)
     } else {
         whole
     };
@@ -388,7 +481,7 @@ fn held_back(points: &[[f64; 3]], bounds: &Aabb, seen: &Seen, c: f64) -> f64 {
 struct Seen {
     /// The better scanned side of the width's middle (±1: the side holding more points).
     side: f64,
-    /// Whether at least [`ONE_SIDED`] of the points lie on that side, as on a drive-by.
+    /// Whether at least [`SymmetryParams::one_sided`] of the points lie on that side, as on a drive-by.
     one_sided: bool,
     /// The points' [`horizontal_slices`] where the cloud is one-sided (nothing reads them
     /// otherwise), else none.
@@ -397,7 +490,7 @@ struct Seen {
 
 impl Seen {
     /// `bounds` is the points' box.
-    fn of(points: &[[f64; 3]], bounds: &Aabb) -> Seen {
+    fn of(points: &[[f64; 3]], bounds: &Aabb, tune: &SymmetryParams) -> Seen {
         let whole = bounds.center()[0];
         let mean = points.iter().map(|p| p[0]).sum::<f64>() / points.len() as f64;
         let side = (mean - whole).signum();
@@ -406,9 +499,9 @@ impl Seen {
             .filter(|p| (p[0] - whole) * side > 0.0)
             .count() as f64
             / points.len() as f64;
-        let one_sided = near_share >= ONE_SIDED;
+        let one_sided = near_share >= tune.one_sided;
         let slices = if one_sided {
-            horizontal_slices(points, bounds)
+            horizontal_slices(points, bounds, tune)
         } else {
             Vec::new()
         };
@@ -419,27 +512,6 @@ impl Seen {
         }
     }
 }
-
-/// Points a tyre track needs in [`between_the_tracks`]: a side view at the vehicle's height
-/// sees the far tyres' inner faces through the gap under the body, often only a few points of
-/// them in the ground band. Chosen on the validation splits among 2, 3, 5 and 10
-/// (lab/2026-12-06-plane-tyres).
-const TRACK_POINTS: usize = 3;
-/// The gap between the two tracks spans at least this share of the cloud's width ...
-const TRACK_GAP: f64 = 0.5;
-/// ... and this share of its length: the generated road vehicles' tracks lie 0.097 (long
-/// buses) to about 0.28 (cars) of their length apart, a train's wheels 0.05–0.07 under its body,
-/// where they show their outer faces and not their treads, so their gap's middle lies beyond
-/// the plane (a validation train went from 0.06 % to 0.49 % of its length off;
-/// lab/2026-12-06-plane-tyres).
-const TRACK_APART: f64 = 0.08;
-
-/// A near track at least this wide across (share of the length) shows its tyres' treads edge
-/// to edge, as a camera beside the vehicle at its height sees them, and then the gap's middle
-/// also overrules a plane the pairs alone placed beyond it, away from the scanned side; from
-/// above, a scanner sees the near tyres' side walls and not their treads' inner edges. Chosen
-/// on the validation splits among 0.01, 0.015, 0.02, 0.025 and 0.03 (lab/2026-12-06-plane-tyres).
-const TREADS_SEEN: f64 = 0.02;
 
 /// Two tyre tracks in a cloud's ground points (see [`between_the_tracks`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -456,7 +528,12 @@ struct Tracks {
 /// under the body, so the gap's two sides are mirror twins, while nothing else of the far side may
 /// be in view (camera partials: lab/2026-12-06-plane-tyres). `bounds` is the points' box, `points`
 /// in [`find_plane`]'s frame (unit length), `scanned_side` (±1) the side the near track is on.
-fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> Option<Tracks> {
+fn between_the_tracks(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    scanned_side: f64,
+    tune: &SymmetryParams,
+) -> Option<Tracks> {
     let ground = at_height(points, GROUND);
     let mut low: Vec<f64> = points
         .iter()
@@ -469,8 +546,8 @@ fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> 
         .enumerate()
         .map(|(i, w)| (w[1] - w[0], i + 1))
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
-    let tracks = at >= TRACK_POINTS && low.len() - at >= TRACK_POINTS;
-    let apart = gap >= TRACK_GAP * (bounds.max[0] - bounds.min[0]) && gap >= TRACK_APART;
+    let tracks = at >= tune.track_points && low.len() - at >= tune.track_points;
+    let apart = gap >= tune.track_gap * (bounds.max[0] - bounds.min[0]) && gap >= tune.track_apart;
     let near_width = if scanned_side > 0.0 {
         low[low.len() - 1] - low[at]
     } else {
@@ -482,18 +559,12 @@ fn between_the_tracks(points: &[[f64; 3]], bounds: &Aabb, scanned_side: f64) -> 
     })
 }
 
-/// [`with_width`] trusts the scanned flank to be seen at its widest only where it lies at least
-/// this share of the half-width from the plane found: a motorcycle seen without its near
-/// handlebar had its plane moved by 10 % of its length. Chosen on two validation splits among
-/// 0, 0.8 and 0.9 (lab/2026-12-03-plane-known-width).
-const FLANK_SEEN: f64 = 0.8;
-
-/// The plane of a scan seen from one side (`ONE_SIDED`, as for the slices' bound) whose vehicle is
+/// The plane of a scan seen from one side (`one_sided`, as for the slices' bound) whose vehicle is
 /// `width` wide (normalized units): no nearer the scanned flank than half the width, so the
 /// mirrored far flank lies at least as far out as the vehicle's width puts it, unless the flank
-/// lies under `FLANK_SEEN` of that from the plane (its widest part is then not seen); where no
+/// lies under `flank_seen` of that from the plane (its widest part is then not seen); where no
 /// plane was found, half the width from that flank. The flank is the outermost point of the scanned
-/// side over the horizontal slices of `SLICE_POINTS` points or more. The width bounds the plane
+/// side over the horizontal slices of `slice_points` points or more. The width bounds the plane
 /// only on that side: where the heading is off by a fraction of a degree, the ends of a long
 /// vehicle stick out past its flank, and setting every plane at half the width from that outermost
 /// point moved good planes by 0.6 % of the length (validation split,
@@ -505,51 +576,50 @@ fn with_width(
     sample: &Sample,
     width: f64,
     plane: Option<Plane>,
+    tune: &SymmetryParams,
 ) -> Option<Plane> {
     if !seen.one_sided {
         return plane;
     }
     let side = seen.side;
-    let Some(flank) = scanned_flank(points, &seen.slices, side) else {
+    let Some(flank) = scanned_flank(points, &seen.slices, side, tune) else {
         return plane;
     };
     let bound = side * (flank - width / 2.0);
     match plane {
         Some(p) if (p.offset - bound) * side <= 0.0 => Some(p),
-        Some(p) if flank - p.offset * side < FLANK_SEEN * width / 2.0 => Some(p),
+        Some(p) if flank - p.offset * side < tune.flank_seen * width / 2.0 => Some(p),
         _ => Some(sample.plane(bound, PlaneFit::Width)),
     }
 }
 
 /// The outermost x towards `side` (±1, times `side`) over the `slices` (see
-/// [`horizontal_slices`]) holding at least [`SLICE_POINTS`] points; `None` when no slice does.
+/// [`horizontal_slices`]) holding at least [`SymmetryParams::slice_points`] points; `None` when no slice does.
 /// A stray point alone in its slice does not count.
-fn scanned_flank(points: &[[f64; 3]], slices: &[Vec<usize>], side: f64) -> Option<f64> {
+fn scanned_flank(
+    points: &[[f64; 3]],
+    slices: &[Vec<usize>],
+    side: f64,
+    tune: &SymmetryParams,
+) -> Option<f64> {
     slices
         .iter()
-        .filter(|m| m.len() >= SLICE_POINTS)
+        .filter(|m| m.len() >= tune.slice_points)
         .flat_map(|m| m.iter().map(|&i| points[i][0] * side))
         .max_by(f64::total_cmp)
 }
 
-/// The indices of `points` in each horizontal slice [`SLICE_HEIGHT`] high, from the bottom of
+/// The indices of `points` in each horizontal slice [`SymmetryParams::slice_height`] high, from the bottom of
 /// `bounds` (the points' box) up.
-fn horizontal_slices(points: &[[f64; 3]], bounds: &Aabb) -> Vec<Vec<usize>> {
-    let slices = (((bounds.max[1] - bounds.min[1]) / SLICE_HEIGHT).ceil() as usize).max(1);
+fn horizontal_slices(points: &[[f64; 3]], bounds: &Aabb, tune: &SymmetryParams) -> Vec<Vec<usize>> {
+    let slices = (((bounds.max[1] - bounds.min[1]) / tune.slice_height).ceil() as usize).max(1);
     let mut members = vec![Vec::new(); slices];
     for (i, p) in points.iter().enumerate() {
-        let slice = (((p[1] - bounds.min[1]) / SLICE_HEIGHT) as usize).min(slices - 1);
+        let slice = (((p[1] - bounds.min[1]) / tune.slice_height) as usize).min(slices - 1);
         members[slice].push(i);
     }
     members
 }
-
-/// Points the heading refinement looks at: it scores ~230 planes, and measured on generated
-/// partials 2,000 points find the heading as well as 4,000 (median 0.22° vs 0.18°, p95 3.0° vs
-/// 3.2°) in 20 % less time.
-const REFINE_SAMPLE: usize = 2000;
-/// Most a heading is turned by [`refine_heading`], degrees.
-const MAX_TURN: f64 = 8.0;
 
 /// Turns `heading` (degrees counter-clockwise from +x seen from above, see
 /// [`mod@crate::complete::orient`]) by at most ±8° so that the vertical plane along it is the
@@ -559,58 +629,55 @@ const MAX_TURN: f64 = 8.0;
 /// A heading a few degrees off leaves the mirror images and the network's views turned by as
 /// much, which costs more F1@0.01 than any other part of orientation; the symmetry plane of a
 /// vehicle pins its length axis to a fraction of a degree.
-pub fn refine_heading(points: &[[f64; 3]], heading: f64) -> Option<f64> {
-    let sample = unit_sample(points)?;
+pub fn refine_heading(points: &[[f64; 3]], heading: f64, tune: &SymmetryParams) -> Option<f64> {
+    let sample = unit_sample(points, tune)?;
     // The plane along heading h has the horizontal normal (sin h, 0, cos h).
     let normal = |h: f64| {
         let (s, c) = h.to_radians().sin_cos();
         [s, 0.0, c]
     };
-    best_angle(&sample, normal, heading, MAX_TURN, MIN_SCORE).map(|h| h.rem_euclid(360.0))
+    best_angle(&sample, normal, heading, tune.max_turn, tune.min_score).map(|h| h.rem_euclid(360.0))
 }
-
-/// Most a cloud is found rolled by [`find_roll`], degrees: a road's crossfall is 2–3 % (about
-/// 1.5°), a wheel on a kerb a few degrees more.
-pub const MAX_ROLL: f64 = 4.0;
-/// Support (the share of points mirrored onto others) the upright plane needs before a roll
-/// is looked for: one-sided scans pair too few points to tell a roll from the plane's offset,
-/// and on upright ones the roll found then scatters by degrees (lab/2026-12-05-roll).
-const MIN_ROLL_SUPPORT: f64 = 0.3;
 
 /// How far a vehicle leans across its width, in degrees about its length: `points` are in the
 /// canonical pose (x across, y up, z along; any unit), and the plane of symmetry that fits them
-/// best has the normal (cos r, sin r, 0) for the r returned, within ±[`MAX_ROLL`]. A scanner's
+/// best has the normal (cos r, sin r, 0) for the r returned, within ±[`SymmetryParams::max_roll`]. A scanner's
 /// up axis is the plumb line, while a vehicle on a cambered road or a kerb leans with it, and
 /// its mirror images then land beside their partners: a lean of 1.5° cost the mirror a tenth of
 /// its F1@0.01 on the validation split (lab/2026-12-05-roll). `None` when the cloud does not
 /// show enough symmetry to tell.
-pub fn find_roll(points: &[[f64; 3]]) -> Option<f64> {
-    let sample = cross_section_sample(points)?;
+pub fn find_roll(points: &[[f64; 3]], tune: &SymmetryParams) -> Option<f64> {
+    let sample = cross_section_sample(points, tune)?;
     let normal = |r: f64| {
         let (s, c) = r.to_radians().sin_cos();
         [c, s, 0.0]
     };
-    best_angle(&sample, normal, 0.0, MAX_ROLL, MIN_ROLL_SUPPORT)
+    best_angle(&sample, normal, 0.0, tune.max_roll, tune.min_roll_support)
 }
 
-/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and scaled by its cross-section
+/// [`SymmetryParams::refine_sample`] points of the cloud, centred on its box and scaled by its cross-section
 /// (the larger of its width and height): a roll moves points across the width by their height
 /// times its angle, so a bus's is measured against its own size, not its length. Mirroring
 /// across a plane that holds the length axis commutes with any scaling along it.
-fn cross_section_sample(points: &[[f64; 3]]) -> Option<Sample> {
+fn cross_section_sample(points: &[[f64; 3]], tune: &SymmetryParams) -> Option<Sample> {
     let bounds = Aabb::of(points)?;
     let [w, h, _] = bounds.extent();
-    scaled_sample(points, &bounds, w.max(h))
+    scaled_sample(points, &bounds, w.max(h), tune)
 }
 
-/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and scaled to unit length.
-fn unit_sample(points: &[[f64; 3]]) -> Option<Sample> {
+/// [`SymmetryParams::refine_sample`] points of the cloud, centred on its box and scaled to unit length.
+fn unit_sample(points: &[[f64; 3]], tune: &SymmetryParams) -> Option<Sample> {
     let bounds = Aabb::of(points)?;
-    scaled_sample(points, &bounds, bounds.longest_side())
+    scaled_sample(points, &bounds, bounds.longest_side(), tune)
 }
 
-/// [`REFINE_SAMPLE`] points of the cloud, centred on its box and divided by `extent`.
-fn scaled_sample(points: &[[f64; 3]], bounds: &Aabb, extent: f64) -> Option<Sample> {
+/// [`SymmetryParams::refine_sample`] points of the cloud, centred on its box and divided by `extent`.
+fn scaled_sample(
+    points: &[[f64; 3]],
+    bounds: &Aabb,
+    extent: f64,
+    tune: &SymmetryParams,
+) -> Option<Sample> {
     if extent <= 0.0 {
         return None;
     }
@@ -619,7 +686,7 @@ fn scaled_sample(points: &[[f64; 3]], bounds: &Aabb, extent: f64) -> Option<Samp
         .iter()
         .map(|p| [0, 1, 2].map(|i| (p[i] - center[i]) / extent))
         .collect();
-    Sample::of(&unit, REFINE_SAMPLE, MIN_LEVER)
+    Sample::of(&unit, tune.refine_sample, tune.min_lever, tune)
 }
 
 /// The angle (degrees) within `max` of `start` whose plane, `normal(angle)` its unit normal,
@@ -675,14 +742,15 @@ fn best_angle(
 struct Sample {
     points: Vec<[f64; 3]>,
     tolerance: f64,
-    /// Points nearer a candidate plane than this do not vote for it ([`MIN_LEVER`]).
+    /// Points nearer a candidate plane than this do not vote for it ([`SymmetryParams::min_lever`]).
     lever: f64,
     grid: MatchGrid,
     index: KnnIndex,
+    tune: SymmetryParams,
 }
 
 impl Sample {
-    fn of(points: &[[f64; 3]], size: usize, lever: f64) -> Option<Sample> {
+    fn of(points: &[[f64; 3]], size: usize, lever: f64, tune: &SymmetryParams) -> Option<Sample> {
         if points.len() < 2 {
             return None;
         }
@@ -698,7 +766,7 @@ impl Sample {
         spacing.sort_by(f64::total_cmp);
         let tolerance = spacing
             .get(spacing.len() / 2)
-            .map_or(MATCH, |&s| MATCH.max(1.5 * s));
+            .map_or(tune.match_distance, |&s| tune.match_distance.max(1.5 * s));
         let grid = MatchGrid::new(&points, tolerance);
         Some(Sample {
             points,
@@ -706,27 +774,28 @@ impl Sample {
             lever,
             grid,
             index,
+            tune: *tune,
         })
     }
 
     /// Unit normals of the sample's points, each from the plane through its nearest
     /// neighbours (the sign is arbitrary), and whether the point lies on the edge of what was
-    /// seen (see [`EDGE_OFFSET`]).
+    /// seen (see [`SymmetryParams::edge_offset`]).
     fn normals(&self) -> Vec<([f64; 3], bool)> {
-        const K: usize = NORMAL_NEIGHBOURS;
+        let neighbours = self.tune.normal_neighbours;
         self.index
-            .k_nearest(&self.points, K)
-            .par_chunks(K)
+            .k_nearest(&self.points, neighbours)
+            .par_chunks(neighbours)
             .map(|near| {
                 let mean = near.iter().fold([0.0; 3], |m, &i| {
-                    [0, 1, 2].map(|k| m[k] + self.points[i][k] / K as f64)
+                    [0, 1, 2].map(|k| m[k] + self.points[i][k] / neighbours as f64)
                 });
                 let mut cov = Matrix3::zeros();
                 for &i in near {
                     let d = Vector3::from([0, 1, 2].map(|k| self.points[i][k] - mean[k]));
                     cov += d * d.transpose();
                 }
-                let spread = (cov.trace() / K as f64).sqrt();
+                let spread = (cov.trace() / neighbours as f64).sqrt();
                 let own = self.points[near[0]];
                 let off = (0..3)
                     .map(|k| (own[k] - mean[k]).powi(2))
@@ -735,7 +804,7 @@ impl Sample {
                 let eigen = SymmetricEigen::new(cov);
                 let smallest = eigen.eigenvalues.imin();
                 let n = eigen.eigenvectors.column(smallest);
-                ([n[0], n[1], n[2]], off > EDGE_OFFSET * spread)
+                ([n[0], n[1], n[2]], off > self.tune.edge_offset * spread)
             })
             .collect()
     }
@@ -755,7 +824,7 @@ impl Sample {
         skip_edges: bool,
     ) -> Option<f64> {
         let mut c = start;
-        for round in 0..ICP_ROUNDS {
+        for round in 0..self.tune.icp_rounds {
             // Wide first, so a plane a few tolerances off finds its pairs, then tight.
             let reach = if round < 5 { 3.0 } else { 1.5 } * self.tolerance;
             let images: Vec<[f64; 3]> = self.points.iter().map(|&p| mirror(p, c)).collect();
@@ -779,7 +848,7 @@ impl Sample {
                 return None;
             }
             // Gauss–Newton, at most a match distance a round.
-            let step = (-num / den).clamp(-MATCH, MATCH);
+            let step = (-num / den).clamp(-self.tune.match_distance, self.tune.match_distance);
             c += step;
             if step.abs() < 1e-6 {
                 break;
@@ -912,7 +981,11 @@ mod tests {
                 .collect()
         };
         for deg in [0.0, 1.5, -3.0] {
-            let found = find_roll(&lean(&sampled.cloud.positions, deg)).expect("a whole car");
+            let found = find_roll(
+                &lean(&sampled.cloud.positions, deg),
+                &SymmetryParams::default(),
+            )
+            .expect("a whole car");
             assert!(
                 (found - deg).abs() <= 0.25,
                 "leaning {deg}°, found {found}°"
@@ -921,7 +994,8 @@ mod tests {
         // One flank and the whole roof, as a scanner above the roof sees them: the roof's halves
         // pair across the plane.
         let side = scanned_side(&sampled).positions;
-        let found = find_roll(&lean(&side, 2.0)).expect("the roof is symmetric");
+        let found = find_roll(&lean(&side, 2.0), &SymmetryParams::default())
+            .expect("the roof is symmetric");
         assert!(
             (found - 2.0).abs() <= 0.25,
             "one side leaning 2°, found {found}°"
@@ -933,7 +1007,10 @@ mod tests {
             .into_iter()
             .filter(|p| p[0] > 0.0 && p[1] < 0.6 * top)
             .collect();
-        assert_eq!(find_roll(&lean(&flank, 2.0)), None);
+        assert_eq!(
+            find_roll(&lean(&flank, 2.0), &SymmetryParams::default()),
+            None
+        );
     }
 
     #[test]
@@ -954,7 +1031,11 @@ mod tests {
     /// `side` (sensor 0.45 above the object's lowest point, 0.8 beside its centre); the
     /// object's own plane is x = 0.
     fn drive_by_plane(category: Category, seed: u64, side: f32) -> Option<Plane> {
-        find_plane(&driven_past(category, seed, side, 0.45), None)
+        find_plane(
+            &driven_past(category, seed, side, 0.45),
+            None,
+            &SymmetryParams::default(),
+        )
     }
 
     /// A cross-section's (x, y) points repeated along the length, 50 times 0.01 apart.
@@ -976,16 +1057,22 @@ mod tests {
         let points = extruded(&section);
         let bounds = Aabb::of(&points).unwrap();
         assert!((bounds.center()[0] - 0.025).abs() < 1e-9);
-        let bound = -0.01 * FAR_EDGE / 2.0;
-        let slices = horizontal_slices(&points, &bounds);
-        assert!((slices_middle(&points, &bounds, &slices, 1.0).unwrap() - bound).abs() < 1e-9);
-        let seen = Seen::of(&points, &bounds);
+        let bound = -0.01 * SymmetryParams::default().far_edge / 2.0;
+        let slices = horizontal_slices(&points, &bounds, &SymmetryParams::default());
         assert!(
-            (held_back(&points, &bounds, &seen, 0.02) - bound).abs() < 1e-9,
+            (slices_middle(&points, &bounds, &slices, 1.0, &SymmetryParams::default()).unwrap()
+                - bound)
+                .abs()
+                < 1e-9
+        );
+        let seen = Seen::of(&points, &bounds, &SymmetryParams::default());
+        assert!(
+            (held_back(&points, &bounds, &seen, 0.02, &SymmetryParams::default()) - bound).abs()
+                < 1e-9,
             "beyond it: held back"
         );
         assert_eq!(
-            held_back(&points, &bounds, &seen, -0.01),
+            held_back(&points, &bounds, &seen, -0.01, &SymmetryParams::default()),
             -0.01,
             "short of it: kept"
         );
@@ -1026,29 +1113,38 @@ mod tests {
         // the near treads' inner edge and the far tyre's inner face is centred on the plane.
         let points = side_view(true);
         let bounds = Aabb::of(&points).unwrap();
-        let tracks = between_the_tracks(&points, &bounds, 1.0).unwrap();
+        let tracks = between_the_tracks(&points, &bounds, 1.0, &SymmetryParams::default()).unwrap();
         assert!(tracks.middle.abs() < 1e-9, "{tracks:?}");
         assert!(
             (tracks.near_width - 0.05).abs() < 1e-9,
             "the treads: {tracks:?}"
         );
-        let plane = find_plane(&points, None).expect("the back and the tyres pair");
+        let plane = find_plane(&points, None, &SymmetryParams::default())
+            .expect("the back and the tyres pair");
         assert_eq!(plane.fit, PlaneFit::Tyres);
         assert!(plane.offset.abs() < 1e-9, "plane at {}", plane.offset);
         // Without the far tyre the ground points are one track, and the slices bound it.
         let points = side_view(false);
         let bounds = Aabb::of(&points).unwrap();
-        assert_eq!(between_the_tracks(&points, &bounds, 1.0), None);
+        assert_eq!(
+            between_the_tracks(&points, &bounds, 1.0, &SymmetryParams::default()),
+            None
+        );
         // Squeezed to a rail vehicle's width the tracks lie too near each other to be tyres'.
         let narrow: Vec<[f64; 3]> = side_view(true)
             .iter()
             .map(|p| [p[0] * 0.2, p[1], p[2]])
             .collect();
         assert_eq!(
-            between_the_tracks(&narrow, &Aabb::of(&narrow).unwrap(), 1.0),
+            between_the_tracks(
+                &narrow,
+                &Aabb::of(&narrow).unwrap(),
+                1.0,
+                &SymmetryParams::default()
+            ),
             None
         );
-        let plane = find_plane(&points, None).expect("the back pairs");
+        let plane = find_plane(&points, None, &SymmetryParams::default()).expect("the back pairs");
         assert_eq!(plane.fit, PlaneFit::HeldBack);
         assert!(plane.offset > 0.03, "plane at {}", plane.offset);
     }
@@ -1060,10 +1156,24 @@ mod tests {
         // near tyres' side walls are (a track as thin as a scanner from above sees), it stays.
         let plane = |points: &[[f64; 3]], fit| {
             let bounds = Aabb::of(points).unwrap();
-            let sample = Sample::of(points, SAMPLE, MIN_LEVER).unwrap();
-            let seen = Seen::of(points, &bounds);
+            let sample = Sample::of(
+                points,
+                SymmetryParams::default().sample,
+                SymmetryParams::default().min_lever,
+                &SymmetryParams::default(),
+            )
+            .unwrap();
+            let seen = Seen::of(points, &bounds, &SymmetryParams::default());
             let found = Some(sample.plane(-0.02, fit));
-            to_the_tyres(points, &bounds, &seen, &sample, found).unwrap()
+            to_the_tyres(
+                points,
+                &bounds,
+                &seen,
+                &sample,
+                found,
+                &SymmetryParams::default(),
+            )
+            .unwrap()
         };
         let treads = side_view(true);
         let moved = plane(&treads, PlaneFit::Pairs);
@@ -1083,8 +1193,23 @@ mod tests {
     fn widen(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
         let bounds = Aabb::of(points).unwrap();
         let across = bounds.max[0] - bounds.min[0];
-        let sample = Sample::of(points, SAMPLE, MIN_LEVER.min(LEVER_OF_WIDTH * across)).unwrap();
-        with_width(points, &Seen::of(points, &bounds), &sample, width, plane)
+        let sample = Sample::of(
+            points,
+            SymmetryParams::default().sample,
+            SymmetryParams::default()
+                .min_lever
+                .min(SymmetryParams::default().lever_of_width * across),
+            &SymmetryParams::default(),
+        )
+        .unwrap();
+        with_width(
+            points,
+            &Seen::of(points, &bounds, &SymmetryParams::default()),
+            &sample,
+            width,
+            plane,
+            &SymmetryParams::default(),
+        )
     }
 
     #[test]
@@ -1153,9 +1278,14 @@ mod tests {
             }
         }
         let bounds = Aabb::of(&points).unwrap();
-        let roof = -0.005 * FAR_EDGE / 2.0;
-        let slices = horizontal_slices(&points, &bounds);
-        assert!((slices_middle(&points, &bounds, &slices, 1.0).unwrap() - roof).abs() < 1e-9);
+        let roof = -0.005 * SymmetryParams::default().far_edge / 2.0;
+        let slices = horizontal_slices(&points, &bounds, &SymmetryParams::default());
+        assert!(
+            (slices_middle(&points, &bounds, &slices, 1.0, &SymmetryParams::default()).unwrap()
+                - roof)
+                .abs()
+                < 1e-9
+        );
     }
 
     #[test]
@@ -1168,12 +1298,27 @@ mod tests {
             .flat_map(|k| section.iter().map(move |&[x, y]| [x, y, k as f64 * 0.01]))
             .collect();
         let bounds = Aabb::of(&points).unwrap();
-        let sample = Sample::of(&points, SAMPLE, MIN_LEVER).unwrap();
-        let slices = horizontal_slices(&points, &bounds);
-        let extent = slices_middle(&points, &bounds, &slices, 1.0);
+        let sample = Sample::of(
+            &points,
+            SymmetryParams::default().sample,
+            SymmetryParams::default().min_lever,
+            &SymmetryParams::default(),
+        )
+        .unwrap();
+        let slices = horizontal_slices(&points, &bounds, &SymmetryParams::default());
+        let extent = slices_middle(&points, &bounds, &slices, 1.0, &SymmetryParams::default());
         let check = |offset: f64| {
             let found = Some(sample.plane(offset, PlaneFit::Refined));
-            in_proportion(&points, &bounds, &slices, &sample, extent, found).unwrap()
+            in_proportion(
+                &points,
+                &bounds,
+                &slices,
+                &sample,
+                extent,
+                found,
+                &SymmetryParams::default(),
+            )
+            .unwrap()
         };
         // 0.4 wide for its length of 1: a car's proportions, kept.
         let kept = check(0.0);
@@ -1199,10 +1344,19 @@ mod tests {
         let points = extruded(&section);
         let bounds = Aabb::of(&points).unwrap();
         let whole = bounds.center()[0];
-        let slices = horizontal_slices(&points, &bounds);
-        assert!(slices_middle(&points, &bounds, &slices, 1.0).unwrap() < whole - 0.04);
+        let slices = horizontal_slices(&points, &bounds, &SymmetryParams::default());
+        assert!(
+            slices_middle(&points, &bounds, &slices, 1.0, &SymmetryParams::default()).unwrap()
+                < whole - 0.04
+        );
         assert_eq!(
-            held_back(&points, &bounds, &Seen::of(&points, &bounds), 0.02),
+            held_back(
+                &points,
+                &bounds,
+                &Seen::of(&points, &bounds, &SymmetryParams::default()),
+                0.02,
+                &SymmetryParams::default()
+            ),
             whole
         );
     }
@@ -1245,7 +1399,8 @@ mod tests {
                 .iter()
                 .map(|p| [p[0] / 4.4 + shift, p[1] / 4.4, p[2] / 4.4])
                 .collect();
-            let plane = find_plane(&points, None).expect("a car scan is symmetric");
+            let plane = find_plane(&points, None, &SymmetryParams::default())
+                .expect("a car scan is symmetric");
             assert!(
                 (plane.offset - shift).abs() < 0.01,
                 "plane at {} for a car centred at {shift}",
@@ -1260,14 +1415,15 @@ mod tests {
         let wall: Vec<[f64; 3]> = (0..2000)
             .map(|i| [0.2, (i / 50) as f64 * 0.01, (i % 50) as f64 * 0.01])
             .collect();
-        assert_eq!(find_plane(&wall, None), None);
+        assert_eq!(find_plane(&wall, None, &SymmetryParams::default()), None);
     }
 
     #[test]
     fn refinement_turns_a_heading_onto_the_plane_of_symmetry() {
         for (truth, error) in [(30.0, 5.0), (200.0, -6.5), (90.0, 2.0), (300.0, 0.0)] {
             let block = car_block(truth, [3.0, -1.0, 7.0]);
-            let refined = refine_heading(&block, truth + error).expect("a car block is symmetric");
+            let refined = refine_heading(&block, truth + error, &SymmetryParams::default())
+                .expect("a car block is symmetric");
             assert!(
                 angle_between(refined, truth) < 0.3,
                 "{refined} for a block at {truth} estimated at {}",
@@ -1281,8 +1437,14 @@ mod tests {
         let wall: Vec<[f64; 3]> = (0..2000)
             .map(|i| [0.2, (i / 50) as f64 * 0.01, (i % 50) as f64 * 0.01])
             .collect();
-        assert_eq!(refine_heading(&wall, 90.0), None);
-        assert_eq!(refine_heading(&[[1.0, 2.0, 3.0]; 10], 90.0), None);
+        assert_eq!(
+            refine_heading(&wall, 90.0, &SymmetryParams::default()),
+            None
+        );
+        assert_eq!(
+            refine_heading(&[[1.0, 2.0, 3.0]; 10], 90.0, &SymmetryParams::default()),
+            None
+        );
     }
 
     #[test]

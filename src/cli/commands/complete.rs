@@ -8,12 +8,19 @@ use crate::cli::streams::{say, tell};
 use anyhow::bail;
 use mvpcc::app::complete::{complete_file, Batch, BatchEntry, FileOptions, FileReport, Job};
 use mvpcc::complete::orient::OrientMode;
-use mvpcc::complete::{Completer, Method, Options, Settings, Source};
+use mvpcc::complete::{Completer, Method, Options, Settings, Source, Tuning};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::io::default_up;
 use std::path::{Path, PathBuf};
 
 pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
+    let tuning = match &args.tuning {
+        Some(path) => Tuning::read(path)?,
+        None => Tuning::default(),
+    };
+    if args.print_tuning {
+        return say(serde_json::to_string_pretty(&tuning)?);
+    }
     let generator = match (args.method, &args.model) {
         (Method::Identity | Method::Mirror, _) => Source::Unused,
         (Method::Network, Some(path)) => Source::File(path),
@@ -29,7 +36,7 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
         _ => super::open_device(args.device, log)?.device,
     };
     let completer = Completer::load(generator, orienter, device, args.occupancy)?;
-    let settings = |input: &Path| settings(&args, input);
+    let settings = |input: &Path| settings(&args, input, tuning);
     let job = Job {
         completer: &completer,
         settings: &settings,
@@ -141,15 +148,15 @@ fn up_axis(args: &CompleteArgs, input: &Path) -> UpAxis {
 }
 
 /// What the options ask of the pipeline for `input`.
-fn settings(args: &CompleteArgs, input: &Path) -> Settings {
+fn settings(args: &CompleteArgs, input: &Path, tuning: Tuning) -> Settings {
     Settings {
         clean: args.clean,
         orient: orient_mode(args),
-        options: options(args, input),
+        options: options(args, input, tuning),
     }
 }
 
-fn options(args: &CompleteArgs, input: &Path) -> Options {
+fn options(args: &CompleteArgs, input: &Path, tuning: Tuning) -> Options {
     let up = up_axis(args, input);
     let sor = args.sor.params();
     if args.paper {
@@ -182,6 +189,7 @@ fn options(args: &CompleteArgs, input: &Path) -> Options {
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),
         vehicle_width: args.vehicle_width,
+        tuning,
     }
 }
 
@@ -197,6 +205,7 @@ mod tests {
         let Command::Complete(args) = cli.command else {
             panic!("parsed as another command");
         };
-        assert_eq!(options(&args, Path::new("in.ply")), Options::default());
+        let options = options(&args, Path::new("in.ply"), Tuning::default());
+        assert_eq!(options, Options::default());
     }
 }

@@ -15,11 +15,12 @@ pub(crate) mod net;
 
 pub use net::{Orienter, OrienterConfig, OrienterNet};
 
-use crate::complete::symmetry::refine_heading;
+use crate::complete::symmetry::{refine_heading, SymmetryParams};
 pub use crate::complete::upright::angle_between;
 use crate::complete::upright::{at_height, GROUND};
 use crate::core::cloud::PointCloud;
 use crate::core::frame::{upright, UpAxis};
+use serde::{Deserialize, Serialize};
 use std::str::FromStr;
 
 /// The built-in orientation network (see docs/pipeline.md, *3. Heading, roll and the network's
@@ -89,11 +90,87 @@ pub struct Orientation {
     pub method: &'static str,
     /// Degrees the refinement turned the estimator's heading; `None` when the heading was
     /// given, neither the wheels nor the symmetry said anything near it, or its flat flanks
-    /// kept the footprint axis (see `FLAT_FLANKS`).
+    /// kept the footprint axis (see `flat_flanks`).
     pub refinement: Option<f64>,
     /// What turned it: `"wheels"` (the line the lowest points lie on, the wheels' ground contact)
     /// or `"symmetry"` (the plane of symmetry, see [`refine_heading`]).
     pub refined_by: Option<&'static str>,
+}
+
+/// The tunables of the geometric heading estimators and their refinement; shares are of the
+/// footprint's length or the points unless said. A file may give some of them (`complete
+/// --tuning`); the rest keep these defaults.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OrientParams {
+    /// Points the footprint search looks at: a stride keeps it a few milliseconds.
+    pub footprint_sample: usize,
+    /// Share of the footprint cut off at each end of each side, so stray points do not widen it.
+    pub trim: f64,
+    /// Share of the points a flank must hold for [`footprint_axis`] to take its axis over the
+    /// smallest rectangle's (chosen on the validation split, lab/2026-12-02-orientation-wheels-flank).
+    pub flank_axis: f64,
+    /// Share of the points on the footprint rectangle's long sides above which the rectangle's
+    /// axis is kept as it is. Flat flanks pin the axis better than the symmetry refinement does:
+    /// on a drive-by scan (one flank seen) the best-supported symmetry plane leans towards the
+    /// scanned side and turns with it. Measured on the 300 generated test partials (README,
+    /// *Orientation*): cars, buses, trucks and trains have 0.43–0.61 of their points there,
+    /// motorcycles 0.09, whose rectangle the refinement corrects by degrees.
+    pub flat_flanks: f64,
+    /// Width of the band `straightest_flank` looks for a flank in, over the footprint's length:
+    /// about the generated scans' range noise, so that a straight flank seen edge-on from above
+    /// falls within it. Chosen on the validation split among 0.002, 0.003, 0.004, 0.005 and 0.01
+    /// (lab/2026-12-06-orientation-flank-tyres).
+    pub flank_band: f64,
+    /// `straightest_flank` turns the axis by at most this many degrees, in steps of
+    /// `flank_step`.
+    pub flank_turn: f64,
+    pub flank_step: f64,
+    /// Points a flank's line needs for its direction to count.
+    pub flank_points: usize,
+    /// Share of the points a flank's band must hold for the flank to count as flat. On the
+    /// generated validation partials the densest band holds 0.08–0.84 of them (0.12 or more where it
+    /// turned the axis by over 0.01°); on a ShapeNet car of the reference data, whose flank curves
+    /// in plan, 0.08, and its tangent there turned the axis 0.6° the wrong way.
+    pub flat_band: f64,
+    /// Bins of a quarter band: `densest_band`'s window is four of them.
+    pub band_bins: usize,
+    /// The ground points must span at least this share of the footprint's length along their line,
+    /// so that both ends' wheels are in it.
+    pub wheelbase: f64,
+    /// ... and lie this thin across it (RMS across over RMS along): a line, not a patch. On the
+    /// validation split 0.1, 0.2 and 0.3 score alike (lab/2026-12-02-orientation-wheels-flank); at 0.2
+    /// a few low returns from the far wheels of a real scan (CAR164) turned its line 3° off its flank.
+    pub wheel_line_width: f64,
+    /// The wheels' line turns an estimate by at most this many degrees; more is another line.
+    pub max_wheel_turn: f64,
+    /// The two ends' tyres must be seen this alike across the line (the widths of their points
+    /// within this share of each other) for `between_the_tyres` to go by their middles.
+    pub tyres_alike: f64,
+    /// Points above this share of the height count as the vehicle's top.
+    pub top: f64,
+}
+
+impl Default for OrientParams {
+    fn default() -> Self {
+        OrientParams {
+            footprint_sample: 6000,
+            trim: 0.01,
+            flank_axis: 0.4,
+            flat_flanks: 0.3,
+            flank_band: 0.003,
+            flank_turn: 2.0,
+            flank_step: 0.05,
+            flank_points: 10,
+            flat_band: 0.1,
+            band_bins: 4,
+            wheelbase: 0.5,
+            wheel_line_width: 0.1,
+            max_wheel_turn: 20.0,
+            tyres_alike: 0.5,
+            top: 0.75,
+        }
+    }
 }
 
 /// Finds the heading of `cloud` (up axis `up`). `orienter` is needed by the modes that
@@ -104,6 +181,8 @@ pub fn orient(
     up: UpAxis,
     mode: OrientMode,
     orienter: Option<&Orienter>,
+    tune: &OrientParams,
+    symmetry: &SymmetryParams,
 ) -> Orientation {
     let fixed = |heading, method| Orientation {
         heading,
@@ -116,22 +195,25 @@ pub fn orient(
         OrientMode::Heading(h) => fixed(Some(h), "given"),
         mode => {
             let points = upright_points(cloud, up);
-            let (estimate, method) = estimate(mode, &points, orienter);
+            let (estimate, method) = estimate(mode, &points, orienter, tune);
             // The flat-flank rule is about the footprint's axis; 90° by default counts as one.
             let from_footprint = match method {
                 "geometric" | "combined" => true,
                 "learned" => false,
                 _ => mode != OrientMode::Learned,
             };
-            let refined = if from_footprint && flank_share(&points, estimate) >= FLAT_FLANKS {
-                None
-            } else {
-                wheel_line(&points)
-                    .map(|line| toward(line, estimate))
-                    .filter(|&line| angle_between(line, estimate) <= MAX_WHEEL_TURN)
-                    .map(|line| (line, "wheels"))
-                    .or_else(|| refine_heading(&points, estimate).map(|h| (h, "symmetry")))
-            };
+            let refined =
+                if from_footprint && flank_share(&points, estimate, tune) >= tune.flat_flanks {
+                    None
+                } else {
+                    wheel_line(&points, tune)
+                        .map(|line| toward(line, estimate))
+                        .filter(|&line| angle_between(line, estimate) <= tune.max_wheel_turn)
+                        .map(|line| (line, "wheels"))
+                        .or_else(|| {
+                            refine_heading(&points, estimate, symmetry).map(|h| (h, "symmetry"))
+                        })
+                };
             Orientation {
                 heading: Some(refined.map_or(estimate, |r| r.0)),
                 method,
@@ -149,13 +231,14 @@ fn estimate(
     mode: OrientMode,
     points: &[[f64; 3]],
     orienter: Option<&Orienter>,
+    tune: &OrientParams,
 ) -> (f64, &'static str) {
     let learned = || orienter.map(|o| o.heading(points));
-    let footprint = || geometric(points).map(|h| (h, "geometric"));
+    let footprint = || geometric(points, tune).map(|h| (h, "geometric"));
     let found = match mode {
         OrientMode::Geometric => footprint(),
         OrientMode::Learned => learned().map(|h| (h, "learned")).or_else(footprint),
-        _ => match (footprint_axis(points), learned()) {
+        _ => match (footprint_axis(points, tune), learned()) {
             (Some(axis), Some(learned)) => Some((toward(axis, learned), "combined")),
             (None, Some(learned)) => Some((learned, "learned")),
             (Some(_), None) => footprint(),
@@ -214,38 +297,33 @@ pub fn heading_of_turn(turn: f64) -> f64 {
     (90.0 + turn).rem_euclid(360.0)
 }
 
-/// Points the footprint search looks at: a stride keeps it a few milliseconds.
-const FOOTPRINT_SAMPLE: usize = 6000;
-/// Share of the footprint cut off at each end of each side, so stray points do not widen it.
-const TRIM: f64 = 0.01;
-
 /// Heading of the length axis (one of its two ends) from the ground footprint; `None` for
 /// fewer than three points. The smallest rectangle around the footprint turned onto its
 /// straightest flank (`straightest_flank`) where its long sides hold many points; where they
 /// hold few and another axis puts most of them on one long, straight flank, that flank's: a
 /// scan that sees one flank and, sparsely, an end is a thin L, whose smallest rectangle lies
 /// diagonally across it (10–18° off on validation camera partials seen from the side).
-pub fn footprint_axis(points: &[[f64; 3]]) -> Option<f64> {
+pub fn footprint_axis(points: &[[f64; 3]], tune: &OrientParams) -> Option<f64> {
     if points.len() < 3 {
         return None;
     }
-    let stride = points.len().div_ceil(FOOTPRINT_SAMPLE);
+    let stride = points.len().div_ceil(tune.footprint_sample);
     let sample: Vec<[f64; 3]> = points.iter().step_by(stride).copied().collect();
-    let rectangle = smallest_rectangle_axis(&sample);
-    if flank_share(&sample, rectangle) >= FLAT_FLANKS {
-        return Some(straightest_flank(&sample, rectangle));
+    let rectangle = smallest_rectangle_axis(&sample, tune);
+    if flank_share(&sample, rectangle, tune) >= tune.flat_flanks {
+        return Some(straightest_flank(&sample, rectangle, tune));
     }
-    let (flank, share) = flank_axis(&sample);
-    let (length, (lo, hi)) = extents(&sample, flank);
-    Some(if share >= FLANK_AXIS && length >= hi - lo {
-        flank_line(&sample, flank)
+    let (flank, share) = flank_axis(&sample, tune);
+    let (length, (lo, hi)) = extents(&sample, flank, tune);
+    Some(if share >= tune.flank_axis && length >= hi - lo {
+        flank_line(&sample, flank, tune)
     } else {
         rectangle
     })
 }
 
 /// Heading of the longer side of the smallest rectangle around `points`' footprint.
-fn smallest_rectangle_axis(points: &[[f64; 3]]) -> f64 {
+fn smallest_rectangle_axis(points: &[[f64; 3]], tune: &OrientParams) -> f64 {
     let mut along = Vec::with_capacity(points.len());
     let mut across = Vec::with_capacity(points.len());
     let mut sides = |angle: f64| {
@@ -256,7 +334,10 @@ fn smallest_rectangle_axis(points: &[[f64; 3]]) -> f64 {
             along.push(p[0] * c + p[2] * s);
             across.push(-p[0] * s + p[2] * c);
         }
-        (trimmed_span(&mut along), trimmed_span(&mut across))
+        (
+            trimmed_span(&mut along, tune),
+            trimmed_span(&mut across, tune),
+        )
     };
     let area = |sides: (f64, f64)| sides.0 * sides.1;
     let mut best = (0.0, f64::MAX);
@@ -286,17 +367,13 @@ fn smallest_rectangle_axis(points: &[[f64; 3]]) -> f64 {
     heading_of(c, s)
 }
 
-/// Share of the points a flank must hold for [`footprint_axis`] to take its axis over the
-/// smallest rectangle's (chosen on the validation split, lab/2026-12-02-orientation-wheels-flank).
-const FLANK_AXIS: f64 = 0.4;
-
 /// The heading (one of the axis's two) with the largest [`flank_share`], searched at 1° then
 /// 0.1°, and that share.
-fn flank_axis(points: &[[f64; 3]]) -> (f64, f64) {
+fn flank_axis(points: &[[f64; 3]], tune: &OrientParams) -> (f64, f64) {
     let best_of = |headings: Vec<f64>| {
         headings
             .into_iter()
-            .map(|h| (h, flank_share(points, h)))
+            .map(|h| (h, flank_share(points, h, tune)))
             .fold(
                 (0.0, f64::MIN),
                 |best, at| if at.1 > best.1 { at } else { best },
@@ -312,35 +389,27 @@ fn flank_axis(points: &[[f64; 3]]) -> (f64, f64) {
 }
 
 /// Length of the middle `1 − 2·TRIM` of `values` (reordered in place).
-fn trimmed_span(values: &mut [f64]) -> f64 {
-    let (lo, hi) = trimmed_range(values);
+fn trimmed_span(values: &mut [f64], tune: &OrientParams) -> f64 {
+    let (lo, hi) = trimmed_range(values, tune);
     hi - lo
 }
 
 /// Ends of the middle `1 − 2·TRIM` of `values` (reordered in place).
-fn trimmed_range(values: &mut [f64]) -> (f64, f64) {
+fn trimmed_range(values: &mut [f64], tune: &OrientParams) -> (f64, f64) {
     let n = values.len();
-    let cut = ((n as f64 * TRIM) as usize).min((n - 1) / 2);
+    let cut = ((n as f64 * tune.trim) as usize).min((n - 1) / 2);
     let hi = *values.select_nth_unstable_by(n - 1 - cut, f64::total_cmp).1;
     let lo = *values.select_nth_unstable_by(cut, f64::total_cmp).1;
     (lo, hi)
 }
 
-/// Share of the points on the footprint rectangle's long sides above which the rectangle's
-/// axis is kept as it is. Flat flanks pin the axis better than the symmetry refinement does:
-/// on a drive-by scan (one flank seen) the best-supported symmetry plane leans towards the
-/// scanned side and turns with it. Measured on the 300 generated test partials (README,
-/// *Orientation*): cars, buses, trucks and trains have 0.43–0.61 of their points there,
-/// motorcycles 0.09, whose rectangle the refinement corrects by degrees.
-const FLAT_FLANKS: f64 = 0.3;
-
 /// Share of `points` (upright) within 1 % of the length from either long side of the footprint
 /// along `heading` (sides trimmed like [`footprint_axis`]'s).
-fn flank_share(points: &[[f64; 3]], heading: f64) -> f64 {
+fn flank_share(points: &[[f64; 3]], heading: f64, tune: &OrientParams) -> f64 {
     if points.len() < 3 {
         return 0.0;
     }
-    let (length, (lo, hi)) = extents(points, heading);
+    let (length, (lo, hi)) = extents(points, heading, tune);
     let band = 0.01 * length;
     let (s, c) = heading.to_radians().sin_cos();
     let on_sides = points
@@ -351,36 +420,19 @@ fn flank_share(points: &[[f64; 3]], heading: f64) -> f64 {
     on_sides as f64 / points.len() as f64
 }
 
-/// Width of the band [`straightest_flank`] looks for a flank in, over the footprint's length:
-/// about the generated scans' range noise, so that a straight flank seen edge-on from above
-/// falls within it. Chosen on the validation split among 0.002, 0.003, 0.004, 0.005 and 0.01
-/// (lab/2026-12-06-orientation-flank-tyres).
-const FLANK_BAND: f64 = 0.003;
-/// [`straightest_flank`] turns the axis by at most this many degrees, in steps of
-/// [`FLANK_STEP`].
-const FLANK_TURN: f64 = 2.0;
-const FLANK_STEP: f64 = 0.05;
-/// Points a flank's line needs for its direction to count.
-const FLANK_POINTS: usize = 10;
-/// Share of the points a flank's band must hold for the flank to count as flat. On the
-/// generated validation partials the densest band holds 0.08–0.84 of them (0.12 or more where it
-/// turned the axis by over 0.01°); on a ShapeNet car of the reference data, whose flank curves
-/// in plan, 0.08, and its tangent there turned the axis 0.6° the wrong way.
-const FLAT_BAND: f64 = 0.1;
-
-/// The heading within [`FLANK_TURN`] of `heading` along which the most points of `points`
-/// (upright) line up in one [`FLANK_BAND`], refined to those points' principal direction: a
+/// The heading within [`OrientParams::flank_turn`] of `heading` along which the most points of `points`
+/// (upright) line up in one [`OrientParams::flank_band`], refined to those points' principal direction: a
 /// flat flank seen edge-on from above. The smallest rectangle follows the trimmed extremes of
 /// the footprint, which a far side seen over part of the length, or a cab narrower than its
 /// box, turns by tenths of a degree (1.7° on a validation train); the flank itself is straight.
-fn straightest_flank(points: &[[f64; 3]], heading: f64) -> f64 {
-    let (length, _) = extents(points, heading);
-    let band = FLANK_BAND * length;
-    let steps = (FLANK_TURN / FLANK_STEP).round() as i32;
+fn straightest_flank(points: &[[f64; 3]], heading: f64, tune: &OrientParams) -> f64 {
+    let (length, _) = extents(points, heading, tune);
+    let band = tune.flank_band * length;
+    let steps = (tune.flank_turn / tune.flank_step).round() as i32;
     let (_, h, lo) = (-steps..=steps)
         .map(|i| {
-            let h = heading + f64::from(i) * FLANK_STEP;
-            let (count, lo) = densest_band(points, h, band);
+            let h = heading + f64::from(i) * tune.flank_step;
+            let (count, lo) = densest_band(points, h, band, tune);
             (count, h, lo)
         })
         .fold(
@@ -392,36 +444,34 @@ fn straightest_flank(points: &[[f64; 3]], heading: f64) -> f64 {
         .iter()
         .filter(|p| (0.0..=band).contains(&(p[0] * s + p[2] * c - lo)))
         .collect();
-    if line.len() < FLANK_POINTS || (line.len() as f64) < FLAT_BAND * points.len() as f64 {
+    if line.len() < tune.flank_points || (line.len() as f64) < tune.flat_band * points.len() as f64
+    {
         return heading;
     }
     toward(principal_axis(&line).0, h)
 }
 
-/// Bins of a quarter band: [`densest_band`]'s window is four of them.
-const BAND_BINS: usize = 4;
-
 /// The most of `points` (upright) within one `band` across `heading`, and where that band
 /// starts, counted in bins of a quarter band. Points more than a band beyond the footprint's
 /// trimmed sides are not counted, so that a stray point far off cannot make the bins many.
-fn densest_band(points: &[[f64; 3]], heading: f64, band: f64) -> (usize, f64) {
+fn densest_band(points: &[[f64; 3]], heading: f64, band: f64, tune: &OrientParams) -> (usize, f64) {
     let (s, c) = heading.to_radians().sin_cos();
     let mut across: Vec<f64> = points.iter().map(|p| p[0] * s + p[2] * c).collect();
-    let (lo, hi) = trimmed_range(&mut across);
+    let (lo, hi) = trimmed_range(&mut across, tune);
     let (lo, hi) = (lo - band, hi + band);
-    let bin = band / BAND_BINS as f64;
+    let bin = band / tune.band_bins as f64;
     let mut counts = vec![0usize; ((hi - lo) / bin) as usize + 1];
     for u in across.iter().filter(|&&u| (lo..=hi).contains(&u)) {
         counts[((u - lo) / bin) as usize] += 1;
     }
     let mut best = (0, lo);
-    let mut window: usize = counts.iter().take(BAND_BINS).sum();
+    let mut window: usize = counts.iter().take(tune.band_bins).sum();
     for start in 0..counts.len() {
         if window > best.0 {
             best = (window, lo + start as f64 * bin);
         }
         window -= counts[start];
-        if let Some(next) = counts.get(start + BAND_BINS) {
+        if let Some(next) = counts.get(start + tune.band_bins) {
             window += next;
         }
     }
@@ -431,8 +481,8 @@ fn densest_band(points: &[[f64; 3]], heading: f64, band: f64) -> (usize, f64) {
 /// The direction of the points on the fuller long side of the footprint along `heading` (within
 /// 1 % of the length of it), as the heading nearest `heading`: a straight flank pins the axis
 /// more finely than the share's plateau, which is as wide as the band.
-fn flank_line(points: &[[f64; 3]], heading: f64) -> f64 {
-    let (length, (lo, hi)) = extents(points, heading);
+fn flank_line(points: &[[f64; 3]], heading: f64, tune: &OrientParams) -> f64 {
+    let (length, (lo, hi)) = extents(points, heading, tune);
     let band = 0.01 * length;
     let (s, c) = heading.to_radians().sin_cos();
     let near = |side: f64| move |p: &&[f64; 3]| (p[0] * s + p[2] * c - side).abs() < band;
@@ -469,50 +519,39 @@ fn principal_axis(points: &[&[f64; 3]]) -> (f64, f64, f64) {
 
 /// The trimmed length of `points` (at least three, upright) along `heading` and their trimmed
 /// range across it.
-fn extents(points: &[[f64; 3]], heading: f64) -> (f64, (f64, f64)) {
+fn extents(points: &[[f64; 3]], heading: f64, tune: &OrientParams) -> (f64, (f64, f64)) {
     let (s, c) = heading.to_radians().sin_cos();
     let mut along: Vec<f64> = points.iter().map(|p| p[0] * c - p[2] * s).collect();
     let mut across: Vec<f64> = points.iter().map(|p| p[0] * s + p[2] * c).collect();
-    (trimmed_span(&mut along), trimmed_range(&mut across))
+    (
+        trimmed_span(&mut along, tune),
+        trimmed_range(&mut across, tune),
+    )
 }
-
-/// The ground points must span at least this share of the footprint's length along their line,
-/// so that both ends' wheels are in it.
-const WHEELBASE: f64 = 0.5;
-/// ... and lie this thin across it (RMS across over RMS along): a line, not a patch. On the
-/// validation split 0.1, 0.2 and 0.3 score alike (lab/2026-12-02-orientation-wheels-flank); at 0.2
-/// a few low returns from the far wheels of a real scan (CAR164) turned its line 3° off its flank.
-const WHEEL_LINE_WIDTH: f64 = 0.1;
-/// The wheels' line turns an estimate by at most this many degrees; more is another line.
-const MAX_WHEEL_TURN: f64 = 20.0;
 
 /// Heading of the line (one of its two ends) the lowest points of `points` (upright) lie on,
 /// where they lie on one: the wheels' ground contact, front and back, which runs parallel to
 /// the plane of symmetry (a motorcycle's tyres, a car's near tyres on a one-sided scan).
 /// `None` when the ground points are few, short of the footprint's length or not thin across.
-fn wheel_line(points: &[[f64; 3]]) -> Option<f64> {
+fn wheel_line(points: &[[f64; 3]], tune: &OrientParams) -> Option<f64> {
     let ground = at_height(points, GROUND);
     let low: Vec<&[f64; 3]> = points.iter().filter(|p| p[1] <= ground).collect();
     if low.len() < 10 {
         return None;
     }
     let (heading, along, across) = principal_axis(&low);
-    let long =
-        span_along(low.iter().copied(), heading) >= WHEELBASE * span_along(points.iter(), heading);
-    let thin = across <= WHEEL_LINE_WIDTH * along;
-    (long && thin).then(|| between_the_tyres(&low, heading))
+    let long = span_along(low.iter().copied(), heading)
+        >= tune.wheelbase * span_along(points.iter(), heading);
+    let thin = across <= tune.wheel_line_width * along;
+    (long && thin).then(|| between_the_tyres(&low, heading, tune))
 }
-
-/// The two ends' tyres must be seen this alike across the line (the widths of their points
-/// within this share of each other) for [`between_the_tyres`] to go by their middles.
-const TYRES_ALIKE: f64 = 0.5;
 
 /// The wheels' line `heading` through the middles of the two ends' tyres: the principal
 /// direction of the ground points leans towards whichever side wall of each tyre is seen more
 /// (0.7–1.2° on validation motorcycles seen by cameras), while the middle of a tyre's points
 /// across the line is its centre wherever its tread is seen edge to edge. Where the two ends'
 /// points are not alike in width (one tyre seen from one side only), `heading` as it is.
-fn between_the_tyres(low: &[&[f64; 3]], heading: f64) -> f64 {
+fn between_the_tyres(low: &[&[f64; 3]], heading: f64, tune: &OrientParams) -> f64 {
     let n = low.len() as f64;
     let (mx, mz) = low
         .iter()
@@ -536,7 +575,7 @@ fn between_the_tyres(low: &[&[f64; 3]], heading: f64) -> f64 {
     };
     let (behind, ahead) = (end(false), end(true));
     let widest = behind.3.max(ahead.3);
-    if behind.0 < 3 || ahead.0 < 3 || (behind.3 - ahead.3).abs() > TYRES_ALIKE * widest {
+    if behind.0 < 3 || ahead.0 < 3 || (behind.3 - ahead.3).abs() > tune.tyres_alike * widest {
         return heading;
     }
     let (along, across) = (ahead.1 - behind.1, ahead.2 - behind.2);
@@ -555,15 +594,12 @@ fn span_along<'a>(points: impl Iterator<Item = &'a [f64; 3]>, heading: f64) -> f
     hi - lo
 }
 
-/// Points above this share of the height count as the vehicle's top.
-const TOP: f64 = 0.75;
-
 /// The footprint rectangle's axis, turned so the front is away from the centre of the
 /// vehicle's top: a car's cabin, a van's or truck's box sit behind the middle.
-pub fn geometric(points: &[[f64; 3]]) -> Option<f64> {
-    let axis = footprint_axis(points)?;
+pub fn geometric(points: &[[f64; 3]], tune: &OrientParams) -> Option<f64> {
+    let axis = footprint_axis(points, tune)?;
     let (dx, dz) = direction(axis);
-    let threshold = at_height(points, TOP);
+    let threshold = at_height(points, tune.top);
     let along: Vec<f64> = points.iter().map(|p| p[0] * dx + p[2] * dz).collect();
     let (a_lo, a_hi) = along
         .iter()
@@ -623,12 +659,12 @@ mod tests {
     fn geometric_estimator_finds_the_known_heading_of_boxes() {
         for heading in [0.0, 15.0, 90.0, 137.0, 200.0, 271.5, 333.0] {
             let points = car_block(heading, [512.0, -3.0, 77.0]);
-            let axis = footprint_axis(&points).unwrap();
+            let axis = footprint_axis(&points, &OrientParams::default()).unwrap();
             assert!(
                 axis_error(axis, heading) < 0.5,
                 "axis {axis} for heading {heading}"
             );
-            let found = geometric(&points).unwrap();
+            let found = geometric(&points, &OrientParams::default()).unwrap();
             assert!(
                 angle_between(found, heading) < 0.5,
                 "found {found} for heading {heading}"
@@ -652,8 +688,13 @@ mod tests {
         for heading in [90.0, 23.0, 161.5] {
             let points = turned(canonical.clone(), heading, [3.0, 0.0, -1.0]);
             // The smallest rectangle lies across the thin L.
-            assert!(axis_error(smallest_rectangle_axis(&points), heading) > 3.0);
-            let axis = footprint_axis(&points).unwrap();
+            assert!(
+                axis_error(
+                    smallest_rectangle_axis(&points, &OrientParams::default()),
+                    heading
+                ) > 3.0
+            );
+            let axis = footprint_axis(&points, &OrientParams::default()).unwrap();
             assert!(
                 axis_error(axis, heading) < 0.2,
                 "axis {axis} for heading {heading}"
@@ -675,16 +716,23 @@ mod tests {
             let points = turned(driven_past(category, seed, side, height), heading, [0.0; 3]);
             let sample: Vec<[f64; 3]> = points
                 .iter()
-                .step_by(points.len().div_ceil(FOOTPRINT_SAMPLE))
+                .step_by(
+                    points
+                        .len()
+                        .div_ceil(OrientParams::default().footprint_sample),
+                )
                 .copied()
                 .collect();
-            let rectangle = smallest_rectangle_axis(&sample);
-            assert!(flank_share(&sample, rectangle) >= FLAT_FLANKS);
+            let rectangle = smallest_rectangle_axis(&sample, &OrientParams::default());
+            assert!(
+                flank_share(&sample, rectangle, &OrientParams::default())
+                    >= OrientParams::default().flat_flanks
+            );
             assert!(
                 axis_error(rectangle, heading) >= 0.1,
                 "{category:?} {seed}: rectangle {rectangle}"
             );
-            let axis = footprint_axis(&points).unwrap();
+            let axis = footprint_axis(&points, &OrientParams::default()).unwrap();
             assert!(
                 axis_error(axis, heading) < 0.05,
                 "{category:?} {seed}: axis {axis}"
@@ -706,9 +754,17 @@ mod tests {
             turned(canonical, 91.0, [0.0; 3])
         };
         let flat = cloud(600, 1400);
-        assert!(axis_error(straightest_flank(&flat, 90.0), 91.0) < 0.01);
+        assert!(
+            axis_error(
+                straightest_flank(&flat, 90.0, &OrientParams::default()),
+                91.0
+            ) < 0.01
+        );
         let sparse = cloud(100, 1900);
-        assert_eq!(straightest_flank(&sparse, 90.0), 90.0);
+        assert_eq!(
+            straightest_flank(&sparse, 90.0, &OrientParams::default()),
+            90.0
+        );
     }
 
     #[test]
@@ -731,7 +787,7 @@ mod tests {
         let low: Vec<&[f64; 3]> = points.iter().collect();
         let leaning = principal_axis(&low).0;
         assert!(axis_error(leaning, heading) > 0.5, "{leaning}");
-        let between = between_the_tyres(&low, leaning);
+        let between = between_the_tyres(&low, leaning, &OrientParams::default());
         assert!(
             axis_error(between, heading) < 0.05,
             "leaning {leaning}, between {between}"
@@ -743,7 +799,10 @@ mod tests {
         let points = turned(one_side, heading, [1.0; 3]);
         let low: Vec<&[f64; 3]> = points.iter().collect();
         let leaning = principal_axis(&low).0;
-        assert_eq!(between_the_tyres(&low, leaning), leaning);
+        assert_eq!(
+            between_the_tyres(&low, leaning, &OrientParams::default()),
+            leaning
+        );
     }
 
     #[test]
@@ -753,14 +812,21 @@ mod tests {
         for (seed, side) in [(1, 1.0), (2, -1.0), (3, 1.0)] {
             let cloud =
                 PointCloud::from_positions(driven_past(Category::Motorcycle, seed, side, 0.6));
-            let found = orient(&cloud, UpAxis::Y, OrientMode::Geometric, None);
+            let found = orient(
+                &cloud,
+                UpAxis::Y,
+                OrientMode::Geometric,
+                None,
+                &OrientParams::default(),
+                &SymmetryParams::default(),
+            );
             assert_eq!(found.refined_by, Some("wheels"), "{found:?}");
             let heading = found.heading.unwrap();
             let off = angle_between(heading, 90.0).min(angle_between(heading, 270.0));
             assert!(off < 0.1, "motorcycle {seed}: heading {heading}");
         }
         // A round lump has no wheels' line.
-        assert_eq!(wheel_line(&ellipsoid()), None);
+        assert_eq!(wheel_line(&ellipsoid(), &OrientParams::default()), None);
     }
 
     #[test]
@@ -772,7 +838,18 @@ mod tests {
             OrientMode::Combined,
             OrientMode::Geometric,
         ] {
-            assert_eq!(orient(&cloud, UpAxis::Y, mode, None).method, "geometric");
+            assert_eq!(
+                orient(
+                    &cloud,
+                    UpAxis::Y,
+                    mode,
+                    None,
+                    &OrientParams::default(),
+                    &SymmetryParams::default()
+                )
+                .method,
+                "geometric"
+            );
         }
         // Nothing to read a heading from: 90°, said so.
         let found = orient(
@@ -780,6 +857,8 @@ mod tests {
             UpAxis::Y,
             OrientMode::Geometric,
             None,
+            &OrientParams::default(),
+            &SymmetryParams::default(),
         );
         assert_eq!((found.heading, found.method), (Some(90.0), "default"));
     }
@@ -788,14 +867,27 @@ mod tests {
     fn flat_flanks_keep_the_footprint_axis_and_round_shapes_are_refined() {
         // The block's scanned flank and its roof's long edges: about half the points.
         let block = car_block(37.0, [0.0; 3]);
-        let share = flank_share(&block, 37.0);
-        assert!(share >= FLAT_FLANKS, "block: {share}");
+        let share = flank_share(&block, 37.0, &OrientParams::default());
+        assert!(
+            share >= OrientParams::default().flat_flanks,
+            "block: {share}"
+        );
         let cloud = PointCloud::from_positions(block);
-        let found = orient(&cloud, UpAxis::Y, OrientMode::Geometric, None);
+        let found = orient(
+            &cloud,
+            UpAxis::Y,
+            OrientMode::Geometric,
+            None,
+            &OrientParams::default(),
+            &SymmetryParams::default(),
+        );
         assert_eq!(found.refinement, None);
         // An ellipsoid (a round, motorcycle-like footprint) has no flat flank.
-        let share = flank_share(&ellipsoid(), 90.0);
-        assert!(share < FLAT_FLANKS / 3.0, "ellipsoid: {share}");
+        let share = flank_share(&ellipsoid(), 90.0, &OrientParams::default());
+        assert!(
+            share < OrientParams::default().flat_flanks / 3.0,
+            "ellipsoid: {share}"
+        );
     }
 
     /// An ellipsoid 0.8 wide, 1 high and 2 long (along z), without its poles.
@@ -826,17 +918,40 @@ mod tests {
                 .map(|[x, y, z]| [x + 650_000.0, -z + 5_270_000.0, y + 110.0])
                 .collect(),
         );
-        let found = orient(&cloud, UpAxis::Z, OrientMode::Geometric, None);
+        let found = orient(
+            &cloud,
+            UpAxis::Z,
+            OrientMode::Geometric,
+            None,
+            &OrientParams::default(),
+            &SymmetryParams::default(),
+        );
         assert!(
             angle_between(found.heading.unwrap(), 30.0) < 0.5,
             "{found:?}"
         );
         assert_eq!(
-            orient(&cloud, UpAxis::Z, OrientMode::Heading(12.0), None).heading,
+            orient(
+                &cloud,
+                UpAxis::Z,
+                OrientMode::Heading(12.0),
+                None,
+                &OrientParams::default(),
+                &SymmetryParams::default()
+            )
+            .heading,
             Some(12.0)
         );
         assert_eq!(
-            orient(&cloud, UpAxis::Z, OrientMode::None, None).heading,
+            orient(
+                &cloud,
+                UpAxis::Z,
+                OrientMode::None,
+                None,
+                &OrientParams::default(),
+                &SymmetryParams::default()
+            )
+            .heading,
             None
         );
     }

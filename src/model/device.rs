@@ -73,7 +73,7 @@ pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
     match choice {
         DeviceChoice::Cpu => Ok(cpu(None)),
         DeviceChoice::Cuda => explicit("cuda", open_cuda()),
-        DeviceChoice::Wgpu => explicit("wgpu", open_wgpu()),
+        DeviceChoice::Wgpu => explicit("wgpu", open_wgpu(true)),
         DeviceChoice::Gpu => Ok(open_any_gpu()),
     }
 }
@@ -97,7 +97,7 @@ fn cpu(fallback: Option<String>) -> Opened {
 fn open_any_gpu() -> Opened {
     open_cuda()
         .or_else(|cuda| {
-            open_wgpu().map_err(|wgpu| format!("{}; running on the CPU", both(&cuda, &wgpu)))
+            open_wgpu(false).map_err(|wgpu| format!("{}; running on the CPU", both(&cuda, &wgpu)))
         })
         .map_or_else(|why| cpu(Some(why)), found)
 }
@@ -145,8 +145,10 @@ fn open_cuda() -> Result<(Device, String), Unavailable> {
     Err(Unavailable::NotBuilt { backend: "CUDA" })
 }
 
+/// The wgpu adapter. A software one (lavapipe, llvmpipe) is taken only when `software` allows
+/// it: `--device wgpu` names the backend and gets it, however slow; `--device gpu` wants speed.
 #[cfg(feature = "wgpu")]
-fn open_wgpu() -> Result<(Device, String), Unavailable> {
+fn open_wgpu(software: bool) -> Result<(Device, String), Unavailable> {
     let device = Device::wgpu_options()
         .init()
         .map_err(|e| Unavailable::NoDevice(format!("no usable wgpu adapter ({e})")))?;
@@ -155,15 +157,18 @@ fn open_wgpu() -> Result<(Device, String), Unavailable> {
         .as_ref()
         .map_or_else(|| "unnamed adapter".to_string(), |i| i.name.clone());
     if is_software_adapter(&name, identity.is_some_and(|i| i.physical.is_none())) {
-        return Err(Unavailable::NoDevice(format!(
-            "the only wgpu adapter is the software rasterizer {name}"
-        )));
+        if !software {
+            return Err(Unavailable::NoDevice(format!(
+                "the only wgpu adapter is the software rasterizer {name}"
+            )));
+        }
+        return Ok((device, format!("{name} (software Vulkan on the CPU, wgpu)")));
     }
     Ok((device, format!("GPU ({name}, wgpu)")))
 }
 
 #[cfg(not(feature = "wgpu"))]
-fn open_wgpu() -> Result<(Device, String), Unavailable> {
+fn open_wgpu(_software: bool) -> Result<(Device, String), Unavailable> {
     Err(Unavailable::NotBuilt { backend: "wgpu" })
 }
 

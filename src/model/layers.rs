@@ -2,13 +2,14 @@
 //! `mvpcc profile` time each kind of layer without a second copy of the forward pass.
 
 use super::{cpu, Padding};
+use crate::core::rng::Lcg;
 use burn::module::{Module, Param, RunningState};
 use burn::nn::conv::{Conv2d, Conv2dConfig, ConvTranspose2d, ConvTranspose2dConfig};
 use burn::nn::{Initializer, InstanceNorm, InstanceNormConfig, PaddingConfig2d};
 use burn::tensor::activation::relu;
 use burn::tensor::module::conv2d;
 use burn::tensor::ops::{ConvOptions, PadMode};
-use burn::tensor::{Device, Distribution, Tensor};
+use burn::tensor::{Device, Tensor, TensorData};
 use std::cell::Cell;
 
 /// What a stretch of the forward pass is spent on, for the per-layer profile.
@@ -442,7 +443,12 @@ impl SpectralConv2d {
         let [c_in, c_out] = channels;
         let weight = gan_init().init([c_out, c_in, kernel, kernel], device);
         let bias = bias.then(|| Initializer::Zeros.init([c_out], device));
-        let u = Tensor::<2>::random([c_out, 1], Distribution::Normal(0.0, 1.0), device);
+        // The power iteration's start is not in the weights files, so it is drawn from a fixed
+        // seed rather than the device's generator: a discriminator loaded on any device, CPU or
+        // GPU, estimates the same norm from its first step.
+        let mut rng = Lcg::new(0x5eed_u64 ^ (c_out as u64) << 20 ^ c_in as u64);
+        let start: Vec<f32> = (0..c_out).map(|_| rng.next_f64() as f32 - 0.5).collect();
+        let u = Tensor::<2>::from_data(TensorData::new(start, [c_out, 1]), device);
         SpectralConv2d {
             weight,
             bias,
@@ -501,7 +507,7 @@ fn normalize(x: Tensor<2>) -> Tensor<2> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::tensor::TensorData;
+    use burn::tensor::Distribution;
 
     /// Largest singular value of a row-major `rows × cols` matrix, by power iteration in f64.
     fn spectral_norm(m: &[f32], rows: usize, cols: usize) -> f64 {

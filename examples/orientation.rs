@@ -12,7 +12,9 @@
 
 use burn::tensor::Device;
 use mvpcc::complete::clean::{clean, CleanParams};
-use mvpcc::complete::orient::{angle_between, orient, OrientMode, OrientParams, Orienter};
+use mvpcc::complete::orient::{
+    angle_between, orient, OrientMode, OrientParams, Orientation, Orienter,
+};
 use mvpcc::complete::symmetry::SymmetryParams;
 use mvpcc::complete::{Completer, Options, Settings, Source};
 use mvpcc::core::cloud::PointCloud;
@@ -36,6 +38,12 @@ const MODES: [(&str, OrientMode); 3] = [
     ("learned", OrientMode::Learned),
     ("combined", OrientMode::Combined),
 ];
+
+/// [`orient`] of an upright (y up) cloud with the default tunables.
+fn orient_y(cloud: &PointCloud, mode: OrientMode, orienter: Option<&Orienter>) -> Orientation {
+    let defaults = (OrientParams::default(), SymmetryParams::default());
+    orient(cloud, UpAxis::Y, mode, orienter, &defaults.0, &defaults.1)
+}
 
 fn arg(name: &str) -> Option<String> {
     let args: Vec<String> = std::env::args().collect();
@@ -168,14 +176,7 @@ impl Generated {
         let truth = (heading_in_partial(&p.sample.spec) + p.turn).rem_euclid(360.0);
         let protocol = p.sample.spec.protocol();
         for (name, mode) in MODES {
-            let found = orient(
-                &p.rotated,
-                UpAxis::Y,
-                mode,
-                Some(orienter),
-                &OrientParams::default(),
-                &SymmetryParams::default(),
-            );
+            let found = orient_y(&p.rotated, mode, Some(orienter));
             let heading = found.heading.unwrap_or(f64::NAN);
             let unrefined = heading - found.refinement.unwrap_or(0.0);
             for (name, e) in [
@@ -306,15 +307,7 @@ fn real_turned(files: &[PathBuf], completer: &Completer, rng: &mut Lcg) -> Resul
     for path in files {
         let cloud = read_cloud(path, None)?.cloud;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-        let heading = orient(
-            &cloud,
-            UpAxis::Y,
-            OrientMode::Auto,
-            Some(orienter),
-            &OrientParams::default(),
-            &SymmetryParams::default(),
-        )
-        .heading;
+        let heading = orient_y(&cloud, OrientMode::Auto, Some(orienter)).heading;
         let plain = completed(completer, &cloud, OrientMode::Auto)?;
         // The scans are only roughly in the canonical pose (heading 90°), so the turned
         // scans' headings are checked against the scan's own estimate, turned.
@@ -327,15 +320,7 @@ fn real_turned(files: &[PathBuf], completer: &Completer, rng: &mut Lcg) -> Resul
         for _ in 0..5 {
             let turn = rng.range(-180.0, 180.0);
             let rotated = turned(&cloud, turn, pivot);
-            let found = orient(
-                &rotated,
-                UpAxis::Y,
-                OrientMode::Auto,
-                Some(orienter),
-                &OrientParams::default(),
-                &SymmetryParams::default(),
-            )
-            .heading;
+            let found = orient_y(&rotated, OrientMode::Auto, Some(orienter)).heading;
             let e = angle_between(found.unwrap_or(f64::NAN), own + turn);
             mls_errors.push(e);
             let done = completed(completer, &rotated, OrientMode::Auto)?;
@@ -371,37 +356,16 @@ fn real_cluttered(files: &[PathBuf], orienter: &Orienter, rng: &mut Lcg) -> Resu
     for path in files {
         let cloud = read_cloud(path, None)?.cloud;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
-        let own = orient(
-            &cloud,
-            UpAxis::Y,
-            OrientMode::Auto,
-            Some(orienter),
-            &OrientParams::default(),
-            &SymmetryParams::default(),
-        )
-        .heading
-        .unwrap_or(90.0);
+        let own = orient_y(&cloud, OrientMode::Auto, Some(orienter))
+            .heading
+            .unwrap_or(90.0);
         for _ in 0..5 {
             let turn = rng.range(-180.0, 180.0);
             let rotated = turned(&cloud, turn, pivot);
             let (cluttered, added) = clutter(&rotated, rng);
-            let raw = orient(
-                &cluttered,
-                UpAxis::Y,
-                OrientMode::Auto,
-                Some(orienter),
-                &OrientParams::default(),
-                &SymmetryParams::default(),
-            );
+            let raw = orient_y(&cluttered, OrientMode::Auto, Some(orienter));
             let (cleaned, report) = clean(&cluttered, UpAxis::Y, &CleanParams::default());
-            let after = orient(
-                &cleaned,
-                UpAxis::Y,
-                OrientMode::Auto,
-                Some(orienter),
-                &OrientParams::default(),
-                &SymmetryParams::default(),
-            );
+            let after = orient_y(&cleaned, OrientMode::Auto, Some(orienter));
             let (e_raw, e_clean) = [raw, after]
                 .map(|o| angle_between(o.heading.unwrap_or(f64::NAN), own + turn))
                 .into();

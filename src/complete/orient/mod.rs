@@ -623,6 +623,12 @@ pub fn geometric(points: &[[f64; 3]], tune: &OrientParams) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::complete::upright::fixtures::{car_block, driven_past, turned};
+
+    /// [`orient`] of an upright (y up) cloud with the default tunables.
+    fn orient_y(cloud: &PointCloud, mode: OrientMode, orienter: Option<&Orienter>) -> Orientation {
+        let defaults = (OrientParams::default(), SymmetryParams::default());
+        orient(cloud, UpAxis::Y, mode, orienter, &defaults.0, &defaults.1)
+    }
     use crate::core::rng::Lcg;
     use crate::datagen::synth::Category;
 
@@ -812,14 +818,7 @@ mod tests {
         for (seed, side) in [(1, 1.0), (2, -1.0), (3, 1.0)] {
             let cloud =
                 PointCloud::from_positions(driven_past(Category::Motorcycle, seed, side, 0.6));
-            let found = orient(
-                &cloud,
-                UpAxis::Y,
-                OrientMode::Geometric,
-                None,
-                &OrientParams::default(),
-                &SymmetryParams::default(),
-            );
+            let found = orient_y(&cloud, OrientMode::Geometric, None);
             assert_eq!(found.refined_by, Some("wheels"), "{found:?}");
             let heading = found.heading.unwrap();
             let off = angle_between(heading, 90.0).min(angle_between(heading, 270.0));
@@ -838,28 +837,10 @@ mod tests {
             OrientMode::Combined,
             OrientMode::Geometric,
         ] {
-            assert_eq!(
-                orient(
-                    &cloud,
-                    UpAxis::Y,
-                    mode,
-                    None,
-                    &OrientParams::default(),
-                    &SymmetryParams::default()
-                )
-                .method,
-                "geometric"
-            );
+            assert_eq!(orient_y(&cloud, mode, None).method, "geometric");
         }
         // Nothing to read a heading from: 90°, said so.
-        let found = orient(
-            &PointCloud::default(),
-            UpAxis::Y,
-            OrientMode::Geometric,
-            None,
-            &OrientParams::default(),
-            &SymmetryParams::default(),
-        );
+        let found = orient_y(&PointCloud::default(), OrientMode::Geometric, None);
         assert_eq!((found.heading, found.method), (Some(90.0), "default"));
     }
 
@@ -873,14 +854,7 @@ mod tests {
             "block: {share}"
         );
         let cloud = PointCloud::from_positions(block);
-        let found = orient(
-            &cloud,
-            UpAxis::Y,
-            OrientMode::Geometric,
-            None,
-            &OrientParams::default(),
-            &SymmetryParams::default(),
-        );
+        let found = orient_y(&cloud, OrientMode::Geometric, None);
         assert_eq!(found.refinement, None);
         // An ellipsoid (a round, motorcycle-like footprint) has no flat flank.
         let share = flank_share(&ellipsoid(), 90.0, &OrientParams::default());

@@ -151,11 +151,7 @@ fn one_training_step_on_wgpu_matches_the_cpu() {
     };
     let ((losses_cpu, weights_cpu), (losses_gpu, weights_gpu)) = (step(&cpu), step(&gpu));
     eprintln!("CPU {losses_cpu:?}\nwgpu {losses_gpu:?}");
-    // The discriminator's own loss is left out: its spectral normalization's power iteration
-    // runs differently on wgpu in training (docs/gpu.md, *wgpu*), while the generator's terms,
-    // which judge by the discriminator too, agree.
-    let terms = |l: &mvpcc::model::gan::StepLosses| l.terms().into_iter().skip(1);
-    for ((name, a), (_, b)) in terms(&losses_cpu).zip(terms(&losses_gpu)) {
+    for ((name, a), (_, b)) in losses_cpu.terms().into_iter().zip(losses_gpu.terms()) {
         let tolerance = 1e-4 * a.abs().max(1.0);
         assert!(
             (a - b).abs() <= tolerance,
@@ -200,5 +196,72 @@ fn complete_on_wgpu_gives_the_cpus_points() {
         let far = nearest.iter().filter(|(_, d)| *d > 1e-4 * length).count();
         eprintln!("{which}: {} points, {far} without a partner", a.len());
         assert_eq!(far, 0, "{far} of the {which} run's points have no partner");
+    }
+}
+
+/// The gradient of each of the discriminator's parameters, in visiting order.
+struct Gradients<'a>(&'a burn::tensor::Gradients, Vec<Vec<f32>>);
+
+impl burn::module::ModuleVisitor for Gradients<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+        if let Some(grad) = param.val().grad(self.0) {
+            self.1
+                .push(grad.into_data().try_to_vec::<f32>().expect("f32 values"));
+        }
+    }
+}
+
+/// Guards the discriminator's loss, which came out at about half its value on Burn 0.22's
+/// fused wgpu backend while written as two means added (the logits equal), with nothing read
+/// back between the forward passes and the loss; and every layer's gradients but the last.
+/// The logit head's weight gradient (one output channel) is wrong there, by up to a few times
+/// its largest element and differently each run, though the gradient it passes back is right: it
+/// is printed, not asserted, and `train --device wgpu` warns (docs/gpu.md, *wgpu*).
+#[test]
+fn the_discriminator_loss_and_its_gradients_on_wgpu_match_the_cpu() {
+    use burn::module::Module;
+    use mvpcc::model::loss::{discriminator_input, discriminator_loss, Adversarial};
+    let (cpu, gpu) = (Device::flex().autodiff(), wgpu().autodiff());
+    let config = Preset::Tiny.config();
+    let bytes = discriminator_to_bytes(&config.init_discriminator(&cpu).unwrap(), &config).unwrap();
+    let planes = config.channels.count() + 1;
+    for kind in [Adversarial::Hinge, Adversarial::NonSaturating] {
+        let run = |device: &Device| {
+            let d =
+                mvpcc::model::weights::discriminator_from_bytes(&bytes, &config, device).unwrap();
+            let b = batch(&config, device);
+            let fake = input(&config, 2, device).narrow(2, 0, planes).reshape([
+                2 * config.views,
+                planes,
+                config.size,
+                config.size,
+            ]);
+            let real = d.forward(discriminator_input(b.target.images, b.target.occupancy));
+            let loss = discriminator_loss(kind, real.logits, d.forward(fake).logits);
+            let grads = loss.clone().backward();
+            let mut collected = Gradients(&grads, Vec::new());
+            d.visit(&mut collected);
+            (
+                loss.into_data().try_to_vec::<f32>().unwrap()[0],
+                collected.1,
+            )
+        };
+        let ((loss_cpu, grads_cpu), (loss_gpu, grads_gpu)) = (run(&cpu), run(&gpu));
+        eprintln!("{kind:?}: loss {loss_cpu} on the CPU, {loss_gpu} on wgpu");
+        assert!(
+            (loss_cpu - loss_gpu).abs() <= 1e-5,
+            "{kind:?}: loss {loss_cpu} on the CPU, {loss_gpu} on wgpu"
+        );
+        assert_eq!(grads_cpu.len(), grads_gpu.len());
+        let head = grads_cpu.len() - 1;
+        for (layer, (a, b)) in grads_cpu.iter().zip(&grads_gpu).enumerate() {
+            let largest = a.iter().fold(0.0f32, |m, g| m.max(g.abs()));
+            let differ = largest_difference(a, b);
+            eprintln!("  layer {layer}: gradients differ by {differ:e} (largest {largest:e})");
+            assert!(
+                layer == head || differ <= 1e-4 * largest,
+                "{kind:?}, layer {layer}: gradients differ by {differ:e} of {largest:e}"
+            );
+        }
     }
 }

@@ -25,8 +25,17 @@ pub enum DeviceChoice {
 pub struct Opened {
     pub device: Device,
     pub description: String,
+    pub backend: Backend,
     /// Why a GPU was asked for and the CPU is used instead.
     pub fallback: Option<String>,
+}
+
+/// The backend an [`Opened`] device runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    Cpu,
+    Cuda,
+    Wgpu,
 }
 
 #[derive(Debug, Error)]
@@ -65,23 +74,24 @@ fn built(backend: &str) -> String {
 }
 
 pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
-    let explicit = |backend, opened: Result<(Device, String), Unavailable>| {
+    let explicit = |kind, backend, opened: Result<(Device, String), Unavailable>| {
         opened
-            .map(found)
+            .map(|opened| found(opened, kind))
             .map_err(|why| DeviceError { backend, why })
     };
     match choice {
         DeviceChoice::Cpu => Ok(cpu(None)),
-        DeviceChoice::Cuda => explicit("cuda", open_cuda()),
-        DeviceChoice::Wgpu => explicit("wgpu", open_wgpu(true)),
+        DeviceChoice::Cuda => explicit(Backend::Cuda, "cuda", open_cuda()),
+        DeviceChoice::Wgpu => explicit(Backend::Wgpu, "wgpu", open_wgpu(true)),
         DeviceChoice::Gpu => Ok(open_any_gpu()),
     }
 }
 
-fn found((device, description): (Device, String)) -> Opened {
+fn found((device, description): (Device, String), backend: Backend) -> Opened {
     Opened {
         device,
         description,
+        backend,
         fallback: None,
     }
 }
@@ -90,16 +100,20 @@ fn cpu(fallback: Option<String>) -> Opened {
     Opened {
         device: Device::flex(),
         description: format!("CPU (flex, {} threads)", rayon::current_num_threads()),
+        backend: Backend::Cpu,
         fallback,
     }
 }
 
 fn open_any_gpu() -> Opened {
     open_cuda()
+        .map(|opened| found(opened, Backend::Cuda))
         .or_else(|cuda| {
-            open_wgpu(false).map_err(|wgpu| format!("{}; running on the CPU", both(&cuda, &wgpu)))
+            open_wgpu(false)
+                .map(|opened| found(opened, Backend::Wgpu))
+                .map_err(|wgpu| format!("{}; running on the CPU", both(&cuda, &wgpu)))
         })
-        .map_or_else(|why| cpu(Some(why)), found)
+        .unwrap_or_else(|why| cpu(Some(why)))
 }
 
 /// The backends this build can run the network on, as `mvpcc --version` lists them.

@@ -7,6 +7,7 @@ use crate::cli::streams::{say, tell};
 use mvpcc::complete::{named_shape, BUILTIN_SHAPE};
 
 use indicatif::ProgressBar;
+use mvpcc::model::device::Backend;
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::ModelConfig;
 use mvpcc::train::dataset::scan_split;
@@ -168,6 +169,12 @@ impl Monitor for Progress {
     }
 }
 
+/// Measured on lavapipe (tests/wgpu.rs); the rest of the discriminator and the whole
+/// generator agree with the CPU there.
+const WGPU_DISCRIMINATOR: &str = "on wgpu the discriminator's last layer learns from a wrong \
+     gradient (a Burn 0.22 fusion fault, docs/gpu.md): the adversarial, perceptual and style \
+     terms train it; set them to 0, or train on the CPU";
+
 fn default_run(data: &Path) -> PathBuf {
     let name = data
         .canonicalize()
@@ -191,6 +198,12 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
         opened.description,
         run.display()
     ));
+
+    if opened.backend == Backend::Wgpu
+        && settings.loss.needs_discriminator(settings.vgg19.is_some())
+    {
+        log.warn(WGPU_DISCRIMINATOR);
+    }
 
     // The first Ctrl-C asks the loop to checkpoint and stop; a second one stops at once.
     let stop = crate::cli::interrupt::graceful();

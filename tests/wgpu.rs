@@ -5,6 +5,8 @@
 
 #![cfg(feature = "wgpu")]
 
+mod common;
+
 use assert_cmd::Command;
 use burn::tensor::{Device, Tensor, TensorData};
 use mvpcc::complete::DEFAULT_MODEL;
@@ -263,5 +265,53 @@ fn the_discriminator_loss_and_its_gradients_on_wgpu_match_the_cpu() {
                 "{kind:?}, layer {layer}: gradients differ by {differ:e} of {largest:e}"
             );
         }
+    }
+}
+
+/// `train --device wgpu` says that the discriminator would learn wrongly there when a term
+/// trains it, and says nothing of it when none does.
+#[test]
+fn training_on_wgpu_warns_when_the_discriminator_trains() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    common::prepare_tiny_data(&data);
+    let warning = "the discriminator's last layer learns from a wrong gradient";
+    for (name, losses, warned) in [
+        ("adversarial", &[][..], true),
+        (
+            "generator-only",
+            &[
+                "--loss-adversarial",
+                "0",
+                "--loss-perceptual",
+                "0",
+                "--loss-style",
+                "0",
+            ][..],
+            false,
+        ),
+    ] {
+        let out = Command::cargo_bin("mvpcc")
+            .unwrap()
+            .args([
+                "train", "--device", "wgpu", "--config", "tiny", "--steps", "0",
+            ])
+            .args([
+                "--batch",
+                "1",
+                "--val-every",
+                "0",
+                "--seen-samples",
+                "0",
+                "--data",
+            ])
+            .arg(&data)
+            .arg("--out")
+            .arg(dir.path().join(name))
+            .args(losses)
+            .assert()
+            .success();
+        let stderr = String::from_utf8_lossy(&out.get_output().stderr).into_owned();
+        assert_eq!(stderr.contains(warning), warned, "{name}: {stderr}");
     }
 }

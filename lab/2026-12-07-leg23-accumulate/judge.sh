@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Judges leg 23's generator (MODEL) against the built-in one on the procedural validation split
+# (val8) and the third-party validation set (tp30): the network alone and the whole pipeline.
+set -euo pipefail
+cd /work/leg23
+m=./mvpcc
+model=${1:?MODEL}
+for data in /work/data/val8 /work/data/tp30; do
+  name=$(basename $data)
+  for mode in alone pipeline; do
+    opts=()
+    [ $mode = alone ] && opts=(--no-keep-input --no-symmetry)
+    for who in builtin leg; do
+      out=judge/$name-$mode-$who
+      rm -rf $out
+      extra=()
+      [ $who = leg ] && extra=(--model "$model")
+      $m -q complete --input-dir $data/clouds/test --include 'partial_*.ply' --output-dir $out --jobs 2 "${opts[@]}" "${extra[@]}"
+      $m eval --data $data --pred-dir $out --tau 0.01 > $out.txt
+      awk -v w="$name $mode $who" '$1 == "all" { print w, "F1", $8, "cd_l1", $6, "cd_l2_half", $5 }' $out.txt
+    done
+  done
+done

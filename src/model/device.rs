@@ -74,10 +74,10 @@ fn built(backend: &str) -> String {
 }
 
 pub fn open(choice: DeviceChoice) -> Result<Opened, DeviceError> {
-    let explicit = |kind, backend, opened: Result<(Device, String), Unavailable>| {
+    let explicit = |kind, name, opened: Result<(Device, String), Unavailable>| {
         opened
             .map(|opened| found(opened, kind))
-            .map_err(|why| DeviceError { backend, why })
+            .map_err(|why| DeviceError { backend: name, why })
     };
     match choice {
         DeviceChoice::Cpu => Ok(cpu(None)),

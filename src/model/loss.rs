@@ -84,8 +84,8 @@ pub fn bce_with_logits<const D: usize>(logits: Tensor<D>, target: Tensor<D>) -> 
 /// Both terms are one mean over the logits side by side, which equals the average of two
 /// means because the two halves are the same size. Two means added in one graph come out wrong
 /// on Burn 0.22's fused wgpu backend (about half the value, and different between runs; the
-/// logits themselves agree with the CPU), and so did the discriminator's gradients:
-/// tests/wgpu.rs guards it.
+/// logits themselves agree with the CPU); tests/wgpu.rs guards it. The logit head's weight
+/// gradient is still wrong there (docs/gpu.md, *wgpu*).
 pub fn discriminator_loss(kind: Adversarial, real: Tensor<4>, fake: Tensor<4>) -> Tensor<1> {
     assert_eq!(
         real.dims(),

@@ -169,11 +169,11 @@ impl Monitor for Progress {
     }
 }
 
-/// Measured on lavapipe (tests/wgpu.rs); the rest of the discriminator and the whole
-/// generator agree with the CPU there.
+/// Measured on lavapipe (tests/wgpu.rs), where the rest of the discriminator and a generator
+/// step agree with the CPU. The `cuda` feature fuses too, but no GPU has measured it.
 const WGPU_DISCRIMINATOR: &str = "on wgpu the discriminator's last layer learns from a wrong \
-     gradient (a Burn 0.22 fusion fault, docs/gpu.md): the adversarial, perceptual and style \
-     terms train it; set them to 0, or train on the CPU";
+     gradient (apparently a Burn 0.22 fusion fault, docs/gpu.md): the adversarial term (and \
+     without --vgg19 the perceptual and style terms) train it; set them to 0, or train on the CPU";
 
 fn default_run(data: &Path) -> PathBuf {
     let name = data

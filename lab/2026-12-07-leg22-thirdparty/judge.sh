@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Judges leg 22's generator (MODEL) against the built-in one on the procedural validation split
-# (val8) and the third-party validation set (tp30): the network alone and the whole pipeline.
+# Judges a CPU leg's generator (MODEL) against the built-in one on the procedural validation
+# split (val8) and the third-party validation set (tp30): the network alone and the whole
+# pipeline. LEG is the leg's directory, holding the binary as ./mvpcc (legs 22 and 23).
+#   judge.sh LEG MODEL
 set -euo pipefail
-cd /work/leg22
+cd "${1:?LEG}"
 m=./mvpcc
-model=${1:?MODEL}
+model=${2:?MODEL}
 for data in /work/data/val8 /work/data/tp30; do
   name=$(basename $data)
   for mode in alone pipeline; do

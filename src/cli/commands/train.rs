@@ -173,7 +173,7 @@ impl Monitor for Progress {
 /// step agree with the CPU. The `cuda` feature fuses too, but no GPU has measured it.
 const WGPU_DISCRIMINATOR: &str = "on wgpu the discriminator's last layer learns from a wrong \
      gradient (apparently a Burn 0.22 fusion fault, docs/gpu.md): the adversarial term (and \
-     without --vgg19 the perceptual and style terms) train it; set them to 0, or train on the CPU";
+     without --vgg19 the perceptual and style terms) trains it; set them to 0, or train on the CPU";
 
 fn default_run(data: &Path) -> PathBuf {
     let name = data

@@ -33,7 +33,11 @@
 #   --widen W         widen the --init weights to width W (train --widen): the leg starts from
 #                     their output with room to learn more (docs/training.md)
 #   --warmup-steps N  steps over which the rate rises to --lr (train --warmup-steps) [0]
-#   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes
+#   --scaling S       on a machine with several GPUs, before the leg: S seconds of training on
+#                     1, 2, … N of them (train --devices, --batch B per GPU), their steps/s and
+#                     objects/s in profiles.txt [0: not measured]
+#   --tiny            CPU smoke test: tiny model, 16 objects, 32² views, 3 minutes (its scaling
+#                     runs on 1 and 2 CPU replicas)
 #
 # OUT gets: run.log (every command and its output, with times), profiles.txt (the
 # `*_ms_median=` lines of every profile, mvpcc and PyTorch), train.json (the run's summary),
@@ -62,6 +66,7 @@ copy_args=()
 category_args=()
 widen_args=()
 warmup=0
+scaling=0
 while [ $# -gt 1 ]; do
     case $1 in
     --bin) bin=$2 ;;
@@ -79,6 +84,7 @@ while [ $# -gt 1 ]; do
     --loss-depth) loss_depth=$2 ;;
     --widen) widen_args=(--widen "$2") ;;
     --warmup-steps) warmup=$2 ;;
+    --scaling) scaling=$2 ;;
     --tiny) tiny=true; shift; continue ;;
     --input-copy) copy_args=(--input-copy); shift; continue ;;
     *) echo "error: unknown option $1" >&2; exit 2 ;;
@@ -132,6 +138,7 @@ if $tiny; then
     device=cpu objects=16 split=0.67 size=32 gt_size=64 batch=2 workers=1 val_every=5 runs=1
     warmup=0
     config=tiny init=none margin=20 patience_args=(--patience 1000) profile_seconds=100000
+    scaling=8
     [ "$minutes" -gt 3 ] && minutes=3 && deadline=$(($(date +%s) + 180))
 fi
 
@@ -281,6 +288,40 @@ fi
 say "waiting for the data"
 wait $prepare || { say "prepare failed"; exit 1; }
 du -sh "$data" >>"$log"
+
+# Data-parallel throughput, 1 → N devices at the same batch per device: what `--devices` buys.
+# The last log record's rate excludes the first steps' kernel compilation when S allows.
+if [ "$scaling" -gt 0 ]; then
+    if $tiny; then
+        lists=(cpu cpu,cpu)
+    else
+        gpus=$(nvidia-smi -L 2>/dev/null | grep -c '^GPU')
+        lists=()
+        for ((k = 1; k <= gpus; k++)); do
+            lists+=("$(seq -s, -f 'cuda:%g' 0 $((k - 1)))")
+        done
+        [ "$gpus" -gt 1 ] || { say "one GPU: no scaling to measure"; lists=(); }
+    fi
+    for list in "${lists[@]}"; do
+        k=$(tr ',' '\n' <<<"$list" | wc -l)
+        scale=$work/scale-$k
+        say "\$ train --devices $list --batch $((batch * k)) ($scaling s)"
+        timeout -k 30 $((scaling + 30)) timeout --foreground -s INT "$scaling" "$mvpcc" --quiet \
+            train --data "$data" --out "$scale" "${init_args[@]}" --size "$size" \
+            --devices "$list" --batch $((batch * k)) "${rate_args[@]}" "${loss_args[@]}" \
+            --val-every 0 --seen-samples 0 --log-every 5 --workers "$workers" 2>>"$log"
+        rate=$(grep -o '"steps_per_second":[0-9.e+-]*' "$scale/log.jsonl" 2>/dev/null | tail -1 |
+            cut -d: -f2)
+        if [ -n "$rate" ]; then
+            echo "scaling devices=$k ($list) batch=$((batch * k)): steps_per_second=$rate" \
+                "objects_per_second=$(awk -v r="$rate" -v b=$((batch * k)) 'BEGIN { print r * b }')" \
+                >>"$profiles"
+        else
+            echo "scaling devices=$k ($list): no rate logged (see run.log)" >>"$profiles"
+        fi
+        rm -rf "$scale"
+    done
+fi
 
 run=$work/run
 left=$((deadline - $(date +%s) - margin))

@@ -41,6 +41,8 @@ fn the_prepared_gpu_run_leaves_profiles_a_trained_leg_and_timings() {
         "mvpcc cpu tiny train step, batch 2: train_step_ms_median=",
         "mvpcc cpu tiny train step, batch 2, sliced layers: train_step_ms_median=",
         "mvpcc cpu tiny forward, batch 1: forward_ms_median=",
+        "scaling devices=1 (cpu) batch=2: steps_per_second=",
+        "scaling devices=2 (cpu,cpu) batch=4: steps_per_second=",
     ] {
         assert!(profiles.contains(line), "no {line:?} in {profiles}");
     }

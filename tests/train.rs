@@ -764,3 +764,85 @@ fn loader_threads_and_queue_are_bounded() {
         assert!(!run.exists());
     }
 }
+
+/// The losses of the `train` records of a run's log, in order.
+fn logged_losses(run: &Path) -> Vec<f64> {
+    let log = std::fs::read_to_string(run.join("log.jsonl")).unwrap();
+    log.lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|r| r["kind"] == "train")
+        .flat_map(|r| {
+            let losses = r["losses"].as_object().unwrap().clone();
+            losses.into_values().map(|v| v.as_f64().unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn two_cpu_replicas_train_as_one_device_does_on_the_whole_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    train(&one, 4, &[]).assert().success();
+    train(&two, 4, &["--devices", "cpu,cpu"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("on 2 replicas, the first on CPU"));
+    let (a, b) = (logged_losses(&one), logged_losses(&two));
+    assert!(a.len() >= 16 && a.len() == b.len(), "{a:?} {b:?}");
+    for (x, y) in a.iter().zip(&b) {
+        assert!(
+            (x - y).abs() <= 1e-4 * x.abs().max(1.0),
+            "losses {a:?} vs {b:?}"
+        );
+    }
+    let difference = max_difference(&output_of(&one), &output_of(&two));
+    assert!(difference < 1e-3, "outputs differ by {difference}");
+}
+
+#[test]
+fn device_lists_that_cannot_work_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    for (list, batch, problem) in [
+        ("cpu,cuda:0", "2", "mixes the CPU and GPUs"),
+        ("cuda:1,cuda:1", "2", "cuda:1 is listed twice"),
+        ("cpu,cpu,cpu", "2", "3 replicas need --batch 3 or more"),
+        ("cpu;cpu", "2", "`cpu;cpu` is not a device"),
+    ] {
+        refused_saying(
+            &mut train(&run, 1, &["--devices", list, "--batch", batch]),
+            problem,
+        );
+        assert!(!run.exists(), "{list} left a run directory");
+    }
+}
+
+/// Debug builds only: a release build has no way to make a replica fail on purpose.
+#[cfg(debug_assertions)]
+#[test]
+fn a_replica_that_fails_stops_the_run_at_a_checkpoint_it_resumes_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let failed = train(&run, 3, &["--devices", "cpu,cpu"])
+        .env("MVPCC_FAIL_REPLICA", "1")
+        .assert()
+        .failure();
+    let stderr = String::from_utf8_lossy(&failed.get_output().stderr).into_owned();
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+    let checkpoint = run.join("checkpoints/step-00000000");
+    let said = |line: &str| {
+        line.starts_with(
+            "error: replica 1 failed: failure injected by MVPCC_FAIL_REPLICA (on CPU (flex, ",
+        ) && line.ends_with(&format!(
+            "threads)) in step 1; stopped with a checkpoint of step 0, {}: continue with --resume",
+            checkpoint.display()
+        ))
+    };
+    assert!(errors.len() == 1 && said(errors[0]), "{stderr}");
+    assert!(run.join("checkpoints/step-00000000").is_dir());
+    train(&run, 3, &["--devices", "cpu,cpu"])
+        .arg("--resume")
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("stopped at step 3"));
+}

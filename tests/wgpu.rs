@@ -134,7 +134,7 @@ fn batch(config: &ModelConfig, device: &Device) -> Batch {
         Tensor::<5>::from_data(values([2, v, c, s, s], 13, 1.0), device) * occupancy.clone();
     Batch {
         input: input(config, 2, device),
-        target: Target { images, occupancy },
+        target: Target::new(images, occupancy),
     }
 }
 

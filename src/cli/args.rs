@@ -714,6 +714,12 @@ pub struct TrainArgs {
     /// Where training runs (GPUs: docs/gpu.md).
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     pub device: DeviceChoice,
+    /// Train data-parallel on several devices: `cuda:0,cuda:1`, `all` (every CUDA device), or
+    /// `cpu,cpu` (replicas sharing the cores, for tests). Each takes its share of every
+    /// micro-batch; their gradients are summed into one step on the first, which keeps the
+    /// weights, validates and checkpoints (docs/training.md, *Several devices*).
+    #[arg(long, value_name = "LIST", conflicts_with = "device")]
+    pub devices: Option<String>,
     #[arg(long, help = defaulted("Objects per micro-batch", train().batch))]
     pub batch: Option<usize>,
     #[arg(long, help = defaulted("Micro-batches accumulated into one optimizer step", train().accumulate))]

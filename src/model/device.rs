@@ -116,6 +116,152 @@ fn open_any_gpu() -> Opened {
         .unwrap_or_else(|why| cpu(Some(why)))
 }
 
+/// `--devices LIST` refused before any work.
+#[derive(Debug, Error)]
+#[error("--devices {list}: {problem}")]
+pub struct DeviceListError {
+    list: String,
+    problem: String,
+}
+
+/// The devices of a data-parallel run (`mvpcc train --devices`), the first of which keeps the
+/// weights: `cpu` (as often as wanted: replicas that share the cores, for tests), `cuda:N`
+/// (`cuda` is `cuda:0`), or `all` for every CUDA device. Each is asked for a tiny result, so
+/// that a device that does not answer is refused here rather than in the first step.
+pub fn open_list(list: &str) -> Result<Vec<Opened>, DeviceListError> {
+    let refuse = |problem: String| DeviceListError {
+        list: list.to_string(),
+        problem,
+    };
+    let entries: Vec<&str> = list.split(',').map(str::trim).collect();
+    // Read whole before any device is opened, so that a mistyped list costs nothing.
+    let mut cuda_seen = Vec::new();
+    for entry in &entries {
+        match *entry {
+            "cpu" => {}
+            "all" if entries.len() == 1 => {}
+            "all" => return Err(refuse("`all` stands alone".to_string())),
+            "wgpu" => {
+                return Err(refuse(
+                    "wgpu trains on one device (--device wgpu); several need CUDA".to_string(),
+                ))
+            }
+            _ => {
+                let index = cuda_index(entry).ok_or_else(|| {
+                    refuse(format!(
+                        "`{entry}` is not a device (cpu, cuda, cuda:N or all)"
+                    ))
+                })?;
+                if cuda_seen.contains(&index) {
+                    return Err(refuse(format!(
+                        "cuda:{index} is listed twice; a GPU runs one replica"
+                    )));
+                }
+                cuda_seen.push(index);
+            }
+        }
+    }
+    if entries.contains(&"cpu") && !cuda_seen.is_empty() {
+        return Err(refuse(
+            "mixes the CPU and GPUs; the replicas run on one backend".to_string(),
+        ));
+    }
+    let opened = match entries[..] {
+        ["all"] => all_cuda().map_err(|why| refuse(why.to_string()))?,
+        _ => entries
+            .iter()
+            .map(|entry| match cuda_index(entry) {
+                Some(index) => nth_cuda(index).map_err(|why| refuse(why.to_string())),
+                None => Ok(cpu(None)),
+            })
+            .collect::<Result<Vec<_>, _>>()?,
+    };
+    for (k, o) in opened.iter().enumerate() {
+        answers(&o.device).map_err(|why| {
+            refuse(format!(
+                "device {} ({}) does not answer: {why}",
+                k + 1,
+                o.description
+            ))
+        })?;
+    }
+    Ok(opened)
+}
+
+/// `cuda` or `cuda:N` → N.
+fn cuda_index(entry: &str) -> Option<usize> {
+    match entry.strip_prefix("cuda")? {
+        "" => Some(0),
+        rest => rest.strip_prefix(':')?.parse().ok(),
+    }
+}
+
+/// A tiny computation on `device`, its panic (a lost or broken device) as the error.
+fn answers(device: &Device) -> Result<(), String> {
+    let sum = crate::core::guard::guarded(|| {
+        burn::tensor::Tensor::<1>::ones([2], device)
+            .sum()
+            .into_scalar::<f32>()
+    })?;
+    match sum == 2.0 {
+        true => Ok(()),
+        false => Err(format!("1 + 1 came back as {sum}")),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn cuda_devices() -> Vec<Device> {
+    Device::enumerate(burn::tensor::DeviceType::Cuda).into_vec()
+}
+
+/// CUDA device `index`, named with its index as a list has several alike.
+#[cfg(feature = "cuda")]
+fn cuda_opened(index: usize, device: Device) -> Opened {
+    let name = device
+        .identity()
+        .map_or_else(|| "unnamed CUDA device".to_string(), |i| i.name);
+    found((device, format!("cuda:{index} ({name})")), Backend::Cuda)
+}
+
+#[cfg(feature = "cuda")]
+fn all_cuda() -> Result<Vec<Opened>, Unavailable> {
+    let devices = cuda_devices();
+    if devices.is_empty() {
+        return Err(Unavailable::NoDevice("no CUDA device answers".to_string()));
+    }
+    Ok(devices
+        .into_iter()
+        .enumerate()
+        .map(|(k, d)| cuda_opened(k, d))
+        .collect())
+}
+
+#[cfg(feature = "cuda")]
+fn nth_cuda(index: usize) -> Result<Opened, Unavailable> {
+    let devices = cuda_devices();
+    let count = devices.len();
+    devices
+        .into_iter()
+        .nth(index)
+        .map(|d| cuda_opened(index, d))
+        .ok_or_else(|| {
+            Unavailable::NoDevice(format!(
+                "there is no cuda:{index} ({count} CUDA device{} here)",
+                if count == 1 { "" } else { "s" }
+            ))
+        })
+}
+
+#[cfg(not(feature = "cuda"))]
+fn all_cuda() -> Result<Vec<Opened>, Unavailable> {
+    Err(Unavailable::NotBuilt { backend: "CUDA" })
+}
+
+#[cfg(not(feature = "cuda"))]
+fn nth_cuda(_index: usize) -> Result<Opened, Unavailable> {
+    Err(Unavailable::NotBuilt { backend: "CUDA" })
+}
+
 /// The backends this build can run the network on, as `mvpcc --version` lists them.
 pub fn built_backends() -> Vec<&'static str> {
     let mut backends = vec!["CPU (flex)"];
@@ -224,6 +370,41 @@ mod tests {
         let e = open(DeviceChoice::Cuda).err().unwrap().to_string();
         assert!(e.starts_with("--device cuda: "), "{e}");
         assert!(e.contains("feature `cuda`"), "{e}");
+    }
+
+    #[test]
+    fn device_lists_open_or_are_refused_in_one_line_naming_the_problem() {
+        let two = open_list("cpu, cpu").unwrap();
+        assert_eq!(two.len(), 2);
+        assert!(two.iter().all(|o| is_cpu(&o.device)));
+        for (list, problem) in [
+            ("cpu,gpu0", "`gpu0` is not a device"),
+            ("cpu,", "`` is not a device"),
+            ("all,cpu", "`all` stands alone"),
+            ("wgpu", "wgpu trains on one device"),
+            ("cuda:x", "`cuda:x` is not a device"),
+            ("cuda:1,cuda:1", "cuda:1 is listed twice"),
+            ("cpu,cuda:0", "mixes the CPU and GPUs"),
+        ] {
+            let e = open_list(list).err().unwrap().to_string();
+            assert_eq!(
+                e,
+                format!("--devices {list}: {}", e.split_once(": ").unwrap().1)
+            );
+            assert!(e.contains(problem), "{list}: {e}");
+        }
+        assert_eq!(cuda_index("cuda"), Some(0));
+        assert_eq!(cuda_index("cuda:3"), Some(3));
+        assert_eq!(cuda_index("cudax"), None);
+    }
+
+    #[cfg(not(feature = "cuda"))]
+    #[test]
+    fn a_gpu_list_without_cuda_says_the_build_lacks_it() {
+        for list in ["cuda:0,cuda:1", "all"] {
+            let e = open_list(list).err().unwrap().to_string();
+            assert!(e.contains("feature `cuda`"), "{e}");
+        }
     }
 
     #[test]

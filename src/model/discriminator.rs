@@ -44,6 +44,15 @@ impl Discriminator {
         Discriminator { convs }
     }
 
+    /// A copy on `device` for another data-parallel replica: the weights forked (their
+    /// gradients its own), the power iteration's state its own, so that only the networks'
+    /// own replica advances theirs.
+    pub fn replica(&self, device: &Device) -> Discriminator {
+        Discriminator {
+            convs: self.convs.iter().map(|c| c.replica(device)).collect(),
+        }
+    }
+
     /// # Shapes
     /// `input`: `[n, channels + 1, S, S]`, images in [0, 1] with the occupancy probability as
     /// the last plane.

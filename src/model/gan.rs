@@ -13,6 +13,9 @@ use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptim
 use burn::tensor::activation::sigmoid;
 use burn::tensor::{Bytes, Device, Distribution, Tensor};
 
+mod replicas;
+pub use replicas::{FailedStep, ReplicaFailure};
+
 /// Optimizer settings; the defaults are the original's (Adam, β = (0, 0.9), the
 /// discriminator at a tenth of the generator's rate). The generator's rate itself is given to
 /// each [`Gan::step`], since the training stages change it.
@@ -44,6 +47,8 @@ pub struct Gan {
     optim: GanOptimConfig,
     g_optim: ModuleOptimizer,
     d_optim: ModuleOptimizer,
+    /// The other devices of a data-parallel step ([`Gan::replicate_on`]).
+    sites: Vec<replicas::Site>,
 }
 
 /// The parts of a training step, in the order they run.
@@ -111,7 +116,7 @@ impl Batch {
             * Tensor::random([objects, v, 1, s, s], Distribution::Bernoulli(0.5), device);
         Batch {
             input: Tensor::cat(vec![images.clone() * seen.clone(), seen], 2),
-            target: Target { images, occupancy },
+            target: Target::new(images, occupancy),
         }
     }
 }
@@ -169,6 +174,7 @@ impl Gan {
             g_optim: adam.init(),
             d_optim: adam.init(),
             optim,
+            sites: Vec::new(),
         }
     }
 
@@ -190,109 +196,31 @@ impl Gan {
     ) -> (Gan, StepLosses) {
         assert!(!micro.is_empty(), "a step needs at least one batch");
         let share = 1.0 / micro.len() as f64;
-        let mut d_grads = GradientsAccumulator::<Discriminator>::new();
-        let mut g_grads = GradientsAccumulator::<Generator>::new();
-        let mut sum = StepLosses::default();
-        let game = self.weights.needs_discriminator(self.vgg.is_some());
-        for batch in micro {
-            let output = self.generator.forward(batch.input.clone());
-            clock.done(StepPhase::GeneratorForward);
-            let target = &batch.target;
-            let (d_loss, real_features) = match game {
-                true => self.discriminator_step(&output, target, share, &mut d_grads, clock),
-                false => {
-                    clock.done(StepPhase::DiscriminatorLoss);
-                    clock.done(StepPhase::DiscriminatorBackward);
-                    (0.0, Vec::new())
-                }
-            };
-            let g =
-                self.generator_step(&output, target, &real_features, share, &mut g_grads, clock);
-            sum = sum.plus(&StepLosses::read(d_loss, g));
-        }
-        if game {
+        let shares: Vec<(&Batch, f64)> = micro.iter().map(|b| (b, share)).collect();
+        let work = self.local_replica().run(&self.weights, &shares, clock);
+        if let Some(d) = work.discriminator {
             self.discriminator = self.d_optim.step(
                 learning_rate * self.optim.d_to_g_rate,
                 self.discriminator,
-                d_grads.grads(),
+                d,
             );
         }
         self.generator = self
             .g_optim
-            .step(learning_rate, self.generator, g_grads.grads());
+            .step(learning_rate, self.generator, work.generator);
         clock.done(StepPhase::Optimizers);
-        (self, sum.scaled(share as f32))
+        (self, work.losses)
     }
 
-    /// The generator's losses on one batch, their gradients accumulated into `g_grads` with
-    /// `share` of the step's weight; `real_features` are the discriminator's features of the
-    /// real views (empty when no term needs them).
-    fn generator_step<C: StepClock>(
-        &self,
-        output: &GeneratorOutput,
-        target: &Target,
-        real_features: &[Tensor<4>],
-        share: f64,
-        g_grads: &mut GradientsAccumulator<Generator>,
-        clock: &mut C,
-    ) -> GeneratorLosses {
-        // Where a term needs it, the generator's loss flows through the discriminator but
-        // must not train it: a copy whose weights record no gradient spares the backward
-        // pass their gradients.
-        let judge = self.discriminator.clone().no_grad();
-        let g = generator_losses(
-            output,
-            target,
-            &judge,
-            real_features,
-            self.vgg.as_ref(),
-            self.depth_axes.as_ref(),
-            &self.weights,
-        );
-        clock.done(StepPhase::GeneratorLoss);
-        let grads = g.total.clone().mul_scalar(share).backward();
-        g_grads.accumulate(
-            &self.generator,
-            GradientsParams::from_grads(grads, &self.generator),
-        );
-        clock.done(StepPhase::GeneratorBackward);
-        g
-    }
-
-    /// The discriminator's loss on one batch, its gradients accumulated into `d_grads` with
-    /// `share` of the step's weight, and its features of the real views. One pass over the real
-    /// views serves both networks: its logits train the discriminator, its features (as
-    /// constants) are what the generator's perceptual and style terms compare against.
-    fn discriminator_step<C: StepClock>(
-        &self,
-        output: &GeneratorOutput,
-        target: &Target,
-        share: f64,
-        d_grads: &mut GradientsAccumulator<Discriminator>,
-        clock: &mut C,
-    ) -> (f32, Vec<Tensor<4>>) {
-        let fake =
-            discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone())).detach();
-        let real = self.discriminator.forward(discriminator_input(
-            target.images.clone(),
-            target.occupancy.clone(),
-        ));
-        let real_features = real.features.iter().map(|f| f.clone().detach()).collect();
-        let d_loss = discriminator_loss(
-            self.weights.adversarial_kind,
-            real.logits,
-            self.discriminator.forward(fake).logits,
-        );
-        clock.done(StepPhase::DiscriminatorLoss);
-        d_grads.accumulate(
-            &self.discriminator,
-            GradientsParams::from_grads(
-                d_loss.clone().mul_scalar(share).backward(),
-                &self.discriminator,
-            ),
-        );
-        clock.done(StepPhase::DiscriminatorBackward);
-        (value(d_loss), real_features)
+    /// The networks as they run on their own device: clones that share the weights (and the
+    /// discriminator's power iteration, which they advance).
+    fn local_replica(&self) -> Replica {
+        Replica {
+            generator: self.generator.clone(),
+            discriminator: self.discriminator.clone(),
+            vgg: self.vgg.clone(),
+            depth_axes: self.depth_axes.clone(),
+        }
     }
 
     /// Both optimizers' state (Adam moments and step counts), generator's first, in Burn's
@@ -328,6 +256,139 @@ impl Gan {
 
     fn adam(&self) -> AdamConfig {
         adam_config(&self.optim)
+    }
+}
+
+/// The networks and frozen inputs of one step on one device.
+struct Replica {
+    generator: Generator,
+    discriminator: Discriminator,
+    vgg: Option<Vgg19>,
+    depth_axes: Option<Tensor<5>>,
+}
+
+/// What a replica's share of a step yields: both networks' gradients (the discriminator's
+/// when it trains) and its losses, weighted by its share.
+struct Work {
+    discriminator: Option<GradientsParams>,
+    generator: GradientsParams,
+    losses: StepLosses,
+}
+
+impl Replica {
+    /// Both networks' gradients over `micro`, each batch's losses weighted by its share of the
+    /// step (the shares of a whole step, over every replica, sum to 1).
+    fn run<C: StepClock>(
+        &self,
+        weights: &LossWeights,
+        micro: &[(&Batch, f64)],
+        clock: &mut C,
+    ) -> Work {
+        let mut d_grads = GradientsAccumulator::<Discriminator>::new();
+        let mut g_grads = GradientsAccumulator::<Generator>::new();
+        let mut losses = StepLosses::default();
+        let game = weights.needs_discriminator(self.vgg.is_some());
+        for &(batch, share) in micro {
+            let output = self.generator.forward(batch.input.clone());
+            clock.done(StepPhase::GeneratorForward);
+            let target = &batch.target;
+            let (d_loss, real_features) = match game {
+                true => {
+                    self.discriminator_step(weights, &output, target, share, &mut d_grads, clock)
+                }
+                false => {
+                    clock.done(StepPhase::DiscriminatorLoss);
+                    clock.done(StepPhase::DiscriminatorBackward);
+                    (0.0, Vec::new())
+                }
+            };
+            let g = self.generator_step(
+                weights,
+                (&output, target),
+                &real_features,
+                share,
+                &mut g_grads,
+                clock,
+            );
+            losses = losses.plus(&StepLosses::read(d_loss, g).scaled(share as f32));
+        }
+        Work {
+            discriminator: game.then(|| d_grads.grads()),
+            generator: g_grads.grads(),
+            losses,
+        }
+    }
+
+    /// The generator's losses on one batch, their gradients accumulated into `g_grads` with
+    /// `share` of the step's weight; `real_features` are the discriminator's features of the
+    /// real views (empty when no term needs them).
+    fn generator_step<C: StepClock>(
+        &self,
+        weights: &LossWeights,
+        (output, target): (&GeneratorOutput, &Target),
+        real_features: &[Tensor<4>],
+        share: f64,
+        g_grads: &mut GradientsAccumulator<Generator>,
+        clock: &mut C,
+    ) -> GeneratorLosses {
+        // Where a term needs it, the generator's loss flows through the discriminator but
+        // must not train it: a copy whose weights record no gradient spares the backward
+        // pass their gradients.
+        let judge = self.discriminator.clone().no_grad();
+        let g = generator_losses(
+            output,
+            target,
+            &judge,
+            real_features,
+            self.vgg.as_ref(),
+            self.depth_axes.as_ref(),
+            weights,
+        );
+        clock.done(StepPhase::GeneratorLoss);
+        let grads = g.total.clone().mul_scalar(share).backward();
+        g_grads.accumulate(
+            &self.generator,
+            GradientsParams::from_grads(grads, &self.generator),
+        );
+        clock.done(StepPhase::GeneratorBackward);
+        g
+    }
+
+    /// The discriminator's loss on one batch, its gradients accumulated into `d_grads` with
+    /// `share` of the step's weight, and its features of the real views. One pass over the real
+    /// views serves both networks: its logits train the discriminator, its features (as
+    /// constants) are what the generator's perceptual and style terms compare against.
+    fn discriminator_step<C: StepClock>(
+        &self,
+        weights: &LossWeights,
+        output: &GeneratorOutput,
+        target: &Target,
+        share: f64,
+        d_grads: &mut GradientsAccumulator<Discriminator>,
+        clock: &mut C,
+    ) -> (f32, Vec<Tensor<4>>) {
+        let fake =
+            discriminator_input(output.images.clone(), sigmoid(output.occupancy.clone())).detach();
+        let real = self.discriminator.forward(discriminator_input(
+            target.images.clone(),
+            target.occupancy.clone(),
+        ));
+        let real_features = real.features.iter().map(|f| f.clone().detach()).collect();
+        let d_loss = discriminator_loss(
+            weights.adversarial_kind,
+            real.logits,
+            self.discriminator.forward(fake).logits,
+        );
+        clock.done(StepPhase::DiscriminatorLoss);
+        d_grads.accumulate(
+            &self.discriminator,
+            GradientsParams::from_grads(
+                d_loss.clone().mul_scalar(share).backward(),
+                &self.discriminator,
+            ),
+        );
+        clock.done(StepPhase::DiscriminatorBackward);
+        (value(d_loss), real_features)
     }
 }
 
@@ -444,7 +505,7 @@ mod tests {
         let occupancy = Tensor::<5>::from_data(TensorData::new(occ, [1, v, 1, s, s]), device);
         let seen = Tensor::<5>::from_data(TensorData::new(partial, [1, v, 1, s, s]), device);
         let input = Tensor::cat(vec![images.clone() * seen.clone(), seen], 2);
-        (input, Target { images, occupancy })
+        (input, Target::new(images, occupancy))
     }
 
     /// The tiny GAN on the CPU, recording gradients, from a seeded initialization.

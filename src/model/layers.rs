@@ -458,6 +458,18 @@ impl SpectralConv2d {
         }
     }
 
+    /// A copy on `device` whose power-iteration state starts from this one's (synced on the
+    /// calling thread) and is its own from then on.
+    pub fn replica(&self, device: &Device) -> SpectralConv2d {
+        SpectralConv2d {
+            weight: self.weight.clone().fork(device),
+            bias: self.bias.clone().map(|b| b.fork(device)),
+            u: RunningState::new(self.u.value_sync().to_device(device)),
+            stride: self.stride,
+            padding: self.padding,
+        }
+    }
+
     /// The weight divided by its estimated spectral norm; advances the power iteration when
     /// the device records gradients.
     pub fn normalized_weight(&self) -> Tensor<4> {

@@ -204,13 +204,30 @@ pub struct Target {
     pub images: Tensor<5>,
     /// `[B, V, 1, S, S]`, 1 where occupied.
     pub occupancy: Tensor<5>,
+    /// The occupied share of the whole micro-batch when this is one replica's part of it
+    /// (`Gan::step_replicated`): the per-pixel terms divide by the whole batch's share, so the
+    /// parts add up to the whole batch's loss.
+    pub batch_foreground: Option<f32>,
 }
 
 impl Target {
+    pub fn new(images: Tensor<5>, occupancy: Tensor<5>) -> Target {
+        Target {
+            images,
+            occupancy,
+            batch_foreground: None,
+        }
+    }
+
     /// The occupied share of the pixels (at least 1e-3), a constant that per-pixel terms are
     /// divided by so that sparse objects weigh the same as dense ones.
     pub fn foreground(&self) -> Tensor<1> {
-        self.occupancy.clone().mean().clamp_min(1e-3).detach()
+        match self.batch_foreground {
+            Some(share) => Tensor::from_floats([share], &self.occupancy.device()),
+            None => self.occupancy.clone().mean(),
+        }
+        .clamp_min(1e-3)
+        .detach()
     }
 }
 
@@ -447,9 +464,11 @@ mod tests {
     fn depth_counts_only_the_error_along_the_axis_where_the_target_has_a_point() {
         let axes = t5(&[0.0, 0.0, 1.0], [1, 1, 3, 1, 1]);
         // Two pixels, planes X, Y, Z; the target at 0.5 everywhere.
-        let target = |occupied: [f32; 2]| Target {
-            images: t5(&[0.5; 6], [1, 1, 3, 1, 2]),
-            occupancy: t5(&occupied, [1, 1, 1, 1, 2]),
+        let target = |occupied: [f32; 2]| {
+            Target::new(
+                t5(&[0.5; 6], [1, 1, 3, 1, 2]),
+                t5(&occupied, [1, 1, 1, 1, 2]),
+            )
         };
         // Pixel 0 is off by 0.4 across the axis only, pixel 1 by 0.3 along it: 0.3²/2 over 2 pixels.
         let pred = t5(&[0.9, 0.5, 0.1, 0.5, 0.5, 0.8], [1, 1, 3, 1, 2]);

@@ -29,6 +29,31 @@ pub struct HostBatch {
 }
 
 impl HostBatch {
+    /// The objects in `parts` runs as even as they go (the first ones one larger), one per
+    /// data-parallel replica; an empty part where there are fewer objects than parts.
+    pub fn split(self, parts: usize) -> Vec<HostBatch> {
+        let b = self.dims[0];
+        let (each, extra) = (b / parts, b % parts);
+        let mut start = 0;
+        (0..parts)
+            .map(|k| {
+                let n = each + usize::from(k < extra);
+                let cut = |data: &[f32]| {
+                    let stride = data.len() / b.max(1);
+                    data[start * stride..(start + n) * stride].to_vec()
+                };
+                let part = HostBatch {
+                    input: cut(&self.input),
+                    images: cut(&self.images),
+                    occupancy: cut(&self.occupancy),
+                    dims: [n, self.dims[1], self.dims[2], self.dims[3]],
+                };
+                start += n;
+                part
+            })
+            .collect()
+    }
+
     pub fn to_device(self, device: &Device) -> Batch {
         let [b, v, c, s] = self.dims;
         let tensor = |data: Vec<f32>, planes: usize| {
@@ -36,10 +61,7 @@ impl HostBatch {
         };
         Batch {
             input: tensor(self.input, c + 1),
-            target: Target {
-                images: tensor(self.images, c),
-                occupancy: tensor(self.occupancy, 1),
-            },
+            target: Target::new(tensor(self.images, c), tensor(self.occupancy, 1)),
         }
     }
 }
@@ -159,5 +181,34 @@ impl Loader {
                 source: std::io::Error::other("the data loader stopped"),
             })
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_splits_into_even_runs_of_whole_objects_in_order() {
+        // Five objects of one view, two planes (one input plane more) of 1×1 pixels, each
+        // object's values its index.
+        let object = |planes: usize| -> Vec<f32> {
+            (0..5)
+                .flat_map(|k| std::iter::repeat_n(k as f32, planes))
+                .collect()
+        };
+        let batch = HostBatch {
+            input: object(3),
+            images: object(2),
+            occupancy: object(1),
+            dims: [5, 1, 2, 1],
+        };
+        let parts = batch.split(3);
+        let sizes: Vec<usize> = parts.iter().map(|p| p.dims[0]).collect();
+        assert_eq!(sizes, [2, 2, 1]);
+        assert_eq!(parts[1].input, [2.0, 2.0, 2.0, 3.0, 3.0, 3.0]);
+        assert_eq!(parts[2].images, [4.0, 4.0]);
+        assert_eq!(parts[0].occupancy, [0.0, 1.0]);
+        assert!(parts.iter().all(|p| p.dims[1..] == [1, 2, 1]));
     }
 }

@@ -372,6 +372,17 @@ pub enum TrainError {
         step: u64,
         last_good: Option<PathBuf>,
     },
+    #[error(
+        "{source} (on {device}) in step {step}; stopped with a checkpoint of step {}, {}: \
+         continue with --resume",
+        step - 1, checkpoint.display()
+    )]
+    Replica {
+        source: crate::model::gan::ReplicaFailure,
+        device: String,
+        step: u64,
+        checkpoint: PathBuf,
+    },
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
@@ -426,6 +437,11 @@ pub struct Job {
     pub max_steps: Option<u64>,
     /// Where the networks run; gradients are recorded on top of it.
     pub device: burn::tensor::Device,
+    /// Further devices of a data-parallel run, each taking its share of every micro-batch
+    /// (`--devices`); empty for one device.
+    pub replicas: Vec<burn::tensor::Device>,
+    /// What the log calls each device of a data-parallel run, `device`'s first.
+    pub device_names: Vec<String>,
     pub resume: bool,
     pub workers: usize,
     pub prefetch: usize,

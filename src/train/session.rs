@@ -3,7 +3,7 @@
 
 use super::checkpoint::{self, TrainState, DISCRIMINATOR_WEIGHTS, GENERATOR_WEIGHTS};
 use super::dataset::Cache;
-use super::loader::{Loader, LoaderPlan};
+use super::loader::{HostBatch, Loader, LoaderPlan};
 use super::validate::{self, Scores};
 use super::{
     advance_on_validation, io_err, samples, write_json, Interval, Job, LogRecord, Monitor, Outcome,
@@ -11,7 +11,7 @@ use super::{
 };
 use crate::core::camera::Camera;
 use crate::io::atomic_write;
-use crate::model::gan::Gan;
+use crate::model::gan::{Batch, Gan};
 use crate::model::loss::depth_axes;
 use crate::model::vgg::Vgg19;
 use burn::tensor::Device;
@@ -23,6 +23,8 @@ use std::time::Instant;
 pub(super) struct Session<'a> {
     job: &'a Job,
     autodiff: Device,
+    /// The other replicas' devices, recording gradients.
+    replicas: Vec<Device>,
     gan: Gan,
     state: TrainState,
     log: RunLog,
@@ -95,6 +97,8 @@ impl<'a> Session<'a> {
         if settings.loss.depth > 0.0 {
             gan.depth_axes = Some(depth_axes(&cameras, &autodiff));
         }
+        let replicas: Vec<Device> = job.replicas.iter().map(|d| d.clone().autodiff()).collect();
+        gan.replicate_on(&replicas);
         write_json(&run.join(CONFIG_FILE), &job.model)?;
         write_json(&run.join(SETTINGS_FILE), settings)?;
 
@@ -115,6 +119,7 @@ impl<'a> Session<'a> {
         Ok(Session {
             job,
             autodiff,
+            replicas,
             gan,
             state,
             log,
@@ -165,12 +170,35 @@ impl<'a> Session<'a> {
         } else {
             settings.loss.tv
         };
-        let batches: Vec<_> = data
-            .micro
-            .into_iter()
-            .map(|b| b.to_device(&self.autodiff))
-            .collect();
-        let (gan, losses) = self.gan.step(&batches, rate);
+        let (gan, losses) = match self.job.replicas.is_empty() {
+            true => {
+                let batches: Vec<_> = data
+                    .micro
+                    .into_iter()
+                    .map(|b| b.to_device(&self.autodiff))
+                    .collect();
+                self.gan.step(&batches, rate)
+            }
+            false => {
+                let parts = self.parts(data.micro);
+                match self.gan.step_replicated(&parts, rate) {
+                    Ok(stepped) => stepped,
+                    Err(failed) => {
+                        let (gan, source) = *failed;
+                        self.gan = gan;
+                        let checkpoint =
+                            checkpoint::save(&self.job.run, &self.gan, &self.state, settings.keep)?;
+                        let device = self.job.device_names.get(source.index).cloned();
+                        return Err(TrainError::Replica {
+                            device: device.unwrap_or_else(|| "an unnamed device".to_string()),
+                            source,
+                            step: self.state.step + 1,
+                            checkpoint,
+                        });
+                    }
+                }
+            }
+        };
         self.gan = gan;
         if let Some((term, value)) = losses.first_non_finite() {
             return Err(TrainError::NonFinite {
@@ -191,6 +219,25 @@ impl<'a> Session<'a> {
             self.log.push(record)?;
         }
         Ok(self)
+    }
+
+    /// Each micro-batch split into one part per replica, on that replica's device.
+    fn parts(&self, micro: Vec<HostBatch>) -> Vec<Vec<Batch>> {
+        let devices: Vec<&Device> = std::iter::once(&self.autodiff)
+            .chain(&self.replicas)
+            .collect();
+        let mut parts: Vec<Vec<Batch>> = devices.iter().map(|_| Vec::new()).collect();
+        for batch in micro {
+            for ((part, device), list) in batch
+                .split(devices.len())
+                .into_iter()
+                .zip(&devices)
+                .zip(&mut parts)
+            {
+                list.push(part.to_device(device));
+            }
+        }
+        parts
     }
 
     /// Validates every `val_every` steps; true when the CD is the run's best.

@@ -7,7 +7,7 @@ use crate::cli::streams::{say, tell};
 use mvpcc::complete::{named_shape, BUILTIN_SHAPE};
 
 use indicatif::ProgressBar;
-use mvpcc::model::device::Backend;
+use mvpcc::model::device::{open_list, Backend};
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::ModelConfig;
 use mvpcc::train::dataset::scan_split;
@@ -190,12 +190,35 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
     let (settings, model) = resolve(&args, &run)?;
     // Before anything is said, so that a wrong path gets its one error line alone.
     scan_split(&args.data, "train")?;
-    let opened = super::open_device(args.device, log)?;
+    let (opened, replicas, device_names) = match &args.devices {
+        Some(list) => {
+            let mut all = open_list(list)?;
+            if settings.batch < all.len() {
+                anyhow::bail!(
+                    "--devices {list}: {} replicas need --batch {} or more (each takes a share \
+                     of every micro-batch)",
+                    all.len(),
+                    all.len()
+                );
+            }
+            let names = all.iter().map(|o| o.description.clone()).collect();
+            let others: Vec<_> = all.drain(1..).map(|o| o.device).collect();
+            (all.remove(0), others, names)
+        }
+        None => (
+            super::open_device(args.device, log)?,
+            Vec::new(),
+            Vec::new(),
+        ),
+    };
+    let on = match replicas.len() {
+        0 => opened.description.clone(),
+        n => format!("{} replicas, the first on {}", n + 1, opened.description),
+    };
     log.info(format!(
-        "training {} ({}) on {} into {}",
+        "training {} ({}) on {on} into {}",
         args.data.display(),
         model.describe(),
-        opened.description,
         run.display()
     ));
 
@@ -217,6 +240,8 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
         settings: settings.clone(),
         max_steps: args.steps,
         device: opened.device,
+        replicas,
+        device_names,
         resume: args.resume,
         workers: args.workers,
         prefetch: args.prefetch,

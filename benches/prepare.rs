@@ -45,7 +45,7 @@ fn stages(c: &mut Criterion) {
     g.bench_function("8 partials with default settings (seeds 0–7)", |b| {
         b.iter(|| {
             for seed in 0..8 {
-                partial(&mesh, &PartialParams::default(), &mut Lcg::new(seed));
+                partial(&mesh, &PartialParams::default(), 0, &mut Lcg::new(seed));
             }
         })
     });

@@ -12,6 +12,11 @@ use serde::{Deserialize, Serialize};
 /// Rig cameras at or above the object: the paper draws partials from these, never from below.
 pub const PARTIAL_CAMERAS: [usize; 12] = [5, 6, 7, 8, 10, 12, 14, 16, 17, 18, 19, 20];
 
+/// The paper's real-MLS protocol (Table 3) scans each object from four fixed cameras: in front
+/// (12, on −z, 21° up), behind (10, on +z), left (17, on −x) and right (19, its mirror image
+/// across the symmetry plane; the rig has no camera straight from either side).
+pub const FOUR_CAMERAS: [usize; 4] = [12, 10, 17, 19];
+
 /// Surface points seen by all 20 rig cameras at `size`², merged and thinned to one point per
 /// `voxel`-sized cube. Inner structure no camera sees is never sampled. Fails on a `size` the
 /// cameras do not render.
@@ -111,9 +116,11 @@ pub enum PartialKinds {
     Cameras,
     /// The profile scanner only.
     Scanner,
-    /// What one camera of the rig sees: the protocol of the paper's real-MLS experiment
-    /// (Table 3).
+    /// What one camera sees, the protocol of the paper's real-MLS experiment (Table 3): sample
+    /// k through camera k mod 4 of the front, behind, left and right ones.
     SingleCamera,
+    /// What one camera sees, drawn from the 12 at or above the object for each sample.
+    RandomCamera,
 }
 
 /// The most points a partial sample is scanned for, about 75 times the largest default draw.
@@ -148,8 +155,14 @@ impl Default for PartialParams {
 /// Resolution a first render is made at to learn how many points a setting gives.
 const PROBE_SIZE: usize = 128;
 
-/// Draws a partial sample's settings from `rng` and scans it.
-pub fn partial(mesh: &Mesh, params: &PartialParams, rng: &mut Lcg) -> (PartialSpec, Surface) {
+/// Draws partial sample `sample`'s settings from `rng` and scans it (the index picks the camera
+/// of [`PartialKinds::SingleCamera`]).
+pub fn partial(
+    mesh: &Mesh,
+    params: &PartialParams,
+    sample: usize,
+    rng: &mut Lcg,
+) -> (PartialSpec, Surface) {
     let target = rng
         .log_range(
             params.min_points as f64,
@@ -157,19 +170,24 @@ pub fn partial(mesh: &Mesh, params: &PartialParams, rng: &mut Lcg) -> (PartialSp
         )
         .min(MAX_PARTIAL_POINTS as f64);
     let use_cameras = match params.kinds {
-        PartialKinds::Cameras | PartialKinds::SingleCamera => true,
+        PartialKinds::Cameras | PartialKinds::SingleCamera | PartialKinds::RandomCamera => true,
         PartialKinds::Scanner => false,
         PartialKinds::Both => rng.chance(0.5),
     };
     let (mut spec, probe) = if use_cameras {
-        let count = match params.kinds {
-            PartialKinds::SingleCamera => 1,
-            _ => 1 + rng.below(3),
+        let cameras: Vec<usize> = match params.kinds {
+            PartialKinds::SingleCamera => vec![FOUR_CAMERAS[sample % FOUR_CAMERAS.len()]],
+            kinds => {
+                let count = match kinds {
+                    PartialKinds::RandomCamera => 1,
+                    _ => 1 + rng.below(3),
+                };
+                let mut pool = PARTIAL_CAMERAS.to_vec();
+                (0..count)
+                    .map(|_| pool.remove(rng.below(pool.len())))
+                    .collect()
+            }
         };
-        let mut pool = PARTIAL_CAMERAS.to_vec();
-        let cameras: Vec<usize> = (0..count)
-            .map(|_| pool.remove(rng.below(pool.len())))
-            .collect();
         let spec = PartialSpec::Cameras {
             cameras,
             size: PROBE_SIZE,
@@ -687,8 +705,8 @@ mod tests {
         let params = PartialParams::default();
         let mut counts = Vec::new();
         for seed in 0..6 {
-            let (spec, a) = partial(&m, &params, &mut Lcg::new(seed));
-            let (spec_b, b) = partial(&m, &params, &mut Lcg::new(seed));
+            let (spec, a) = partial(&m, &params, 0, &mut Lcg::new(seed));
+            let (spec_b, b) = partial(&m, &params, 0, &mut Lcg::new(seed));
             assert_eq!((&spec, &a), (&spec_b, &b));
             counts.push((spec, a.len()));
         }
@@ -708,21 +726,47 @@ mod tests {
             ..PartialParams::default()
         };
         for seed in 0..4 {
-            let (spec, s) = partial(&m, &narrow, &mut Lcg::new(seed));
+            let (spec, s) = partial(&m, &narrow, 0, &mut Lcg::new(seed));
             assert!((6_600..15_000).contains(&s.len()), "{spec:?}: {}", s.len());
         }
     }
 
     #[test]
-    fn the_single_camera_protocol_sees_through_one_camera_of_the_rig() {
+    fn the_single_camera_protocol_takes_front_behind_left_and_right_in_turn() {
         let m = normalized_car(5);
         let params = PartialParams {
             kinds: PartialKinds::SingleCamera,
             ..PartialParams::default()
         };
+        let cameras: Vec<Vec<usize>> = (0..8)
+            .map(
+                |k| match partial(&m, &params, k, &mut Lcg::new(k as u64)).0 {
+                    PartialSpec::Cameras { cameras, .. } => cameras,
+                    spec => panic!("{spec:?}"),
+                },
+            )
+            .collect();
+        let turn = FOUR_CAMERAS.map(|c| vec![c]);
+        assert_eq!(cameras, [turn.clone(), turn].concat());
+        // Front and behind on the length's axis, left and right mirror images across x = 0.
+        let centre = |i| Camera::rig(i, 64).unwrap().center();
+        let [front, behind, left, right] = FOUR_CAMERAS.map(centre);
+        assert!(
+            front[0].abs() < 1e-9 && front[2] < 0.0 && behind[0].abs() < 1e-9 && behind[2] > 0.0
+        );
+        assert!(left[0] < 0.0 && (left[0] + right[0]).abs() < 1e-9 && left[2] == right[2]);
+    }
+
+    #[test]
+    fn the_random_camera_protocol_sees_through_one_camera_of_the_rig() {
+        let m = normalized_car(5);
+        let params = PartialParams {
+            kinds: PartialKinds::RandomCamera,
+            ..PartialParams::default()
+        };
         let mut seen = std::collections::BTreeSet::new();
         for seed in 0..8 {
-            let (spec, points) = partial(&m, &params, &mut Lcg::new(seed));
+            let (spec, points) = partial(&m, &params, 0, &mut Lcg::new(seed));
             let PartialSpec::Cameras { cameras, .. } = spec else {
                 panic!("{spec:?}");
             };

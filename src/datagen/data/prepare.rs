@@ -209,7 +209,8 @@ fn write_sample(
     sample: Sample,
 ) -> Result<SampleEntry, PrepareError> {
     let mut rng = Lcg::new(sample.seed);
-    let (spec, surface) = partial(mesh, &params.partial, &mut rng);
+    // Samples are numbered from 1; the first single-camera sample is the front camera.
+    let (spec, surface) = partial(mesh, &params.partial, sample.k - 1, &mut rng);
     create_dir(sample.views_dir)?;
     let views = match params.views_frame {
         ViewsFrame::Path => project(&surface.points, Some(&surface.colors), cameras),

@@ -60,8 +60,9 @@ impl Gan {
     /// One optimizer step of both networks over `shards`: `shards[r][m]` is replica `r`'s part
     /// of micro-batch `m`, on that replica's device (replica 0 on the networks' own). Each part's
     /// losses weigh by its share of the micro-batch's objects, so the step equals one replica's
-    /// step over the whole micro-batches (to float rounding). On a replica's failure nothing
-    /// is updated and the networks come back with it.
+    /// step over the whole micro-batches (to float rounding). On a replica's failure no weight
+    /// is updated (the first replica's power iteration may have advanced) and the networks come
+    /// back with the failure.
     pub fn step_replicated(
         mut self,
         shards: &[Vec<Batch>],

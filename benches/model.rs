@@ -13,7 +13,7 @@ fn generator_forward(c: &mut Criterion) {
     group
         .sample_size(10)
         .measurement_time(Duration::from_secs(20));
-    for preset in [Preset::Small, Preset::Cpu, Preset::Paper] {
+    for preset in [Preset::Small, Preset::Cpu, Preset::Original] {
         let config = preset.config();
         let generator = config.init_generator(&device).unwrap();
         let shape = [

@@ -233,7 +233,7 @@ prepare=$!
 if $tiny; then
     devices=(cpu) step_configs=(tiny) forward_configs=(tiny) torch_device=cpu profile_batch=2
 else
-    devices=(cuda) step_configs=(small cpu) forward_configs=(paper) torch_device=cuda
+    devices=(cuda) step_configs=(small cpu) forward_configs=(original) torch_device=cuda
     profile_batch=16
     $vulkan && devices+=(wgpu)
 fi

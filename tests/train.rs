@@ -411,6 +411,69 @@ fn loss_weights_the_adversarial_loss_and_early_fusion_are_options_kept_in_the_ru
     }
 }
 
+/// `--config paper` and `--config original` train (at 32², one step) and write the network and
+/// loss docs/paper.md's preset table gives them; their perceptual and style terms are VGG19's,
+/// which is not shipped, and the run says so.
+#[test]
+fn the_paper_and_original_presets_train_with_the_settings_the_table_gives() {
+    let dir = tempfile::tempdir().unwrap();
+    let read = |run: &Path, file: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(run.join(file)).unwrap()).unwrap()
+    };
+    #[rustfmt::skip]
+    let expected = [
+        ("paper", "decoder", false, 250.0, 0.1, "pixels", "colour", "non-saturating"),
+        ("original", "encoder", true, 0.1, 250.0, "side", "all", "hinge"),
+    ];
+    for (preset, dilation, fusion_norm, perceptual, style, tv_scale, planes, adversarial) in
+        expected
+    {
+        let run = dir.path().join(preset);
+        base(&run)
+            .args([
+                "--config", preset, "--size", "32", "--steps", "1", "--batch", "1",
+            ])
+            .args(["--val-every", "0", "--seen-samples", "0"])
+            .assert()
+            .success()
+            .stderr(predicate::str::contains(format!(
+                "warning: --config {preset}: its perceptual and style terms are VGG19's"
+            )));
+        let bytes = std::fs::read(run.join("generator.safetensors")).unwrap();
+        let (_, config) = generator_from_bytes(&bytes, &Device::flex()).unwrap();
+        assert_eq!(
+            (config.width, config.res_blocks, config.size),
+            (64, 8, 32),
+            "{preset}"
+        );
+        let dilation_of = |d: mvpcc::model::Dilation| format!("{d:?}").to_lowercase();
+        assert_eq!(dilation_of(config.dilation()), dilation, "{preset}");
+        assert_eq!(config.normalizes_fusion(), fusion_norm, "{preset}");
+        let loss = &read(&run, "train.json")["loss"];
+        assert_eq!(loss["perceptual"].as_f64(), Some(perceptual), "{preset}");
+        assert_eq!(loss["style"].as_f64(), Some(style), "{preset}");
+        assert_eq!(loss["tv_scale"], tv_scale, "{preset}");
+        assert_eq!(loss["feature_planes"], planes, "{preset}");
+        assert_eq!(loss["adversarial_kind"], adversarial, "{preset}");
+    }
+    // A preset's choice is an option like any other: the original network with the text's
+    // dilation and loss scale.
+    let mixed = dir.path().join("mixed");
+    #[rustfmt::skip]
+    base(&mixed)
+        .args(["--config", "original", "--size", "32", "--steps", "1", "--batch", "1"])
+        .args(["--val-every", "0", "--seen-samples", "0", "--dilation", "decoder"])
+        .args(["--tv-scale", "pixels", "--fusion-norm", "false", "--loss-perceptual", "0"])
+        .args(["--loss-style", "0"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("VGG19").not());
+    let config = read(&mixed, "config.json");
+    assert_eq!(config["dilation"], "decoder");
+    assert_eq!(config["fusion_norm"], false);
+    assert_eq!(read(&mixed, "train.json")["loss"]["tv_scale"], "pixels");
+}
+
 #[test]
 fn a_run_refuses_to_overwrite_or_to_resume_with_other_settings() {
     let dir = tempfile::tempdir().unwrap();

@@ -21,7 +21,8 @@ import torch
 from torch import nn
 
 PRESETS = {
-    "paper": dict(width=64, res_blocks=8, size=256, padding="reflect"),
+    # The paper's network as the original code builds it (`mvpcc profile --config original`).
+    "original": dict(width=64, res_blocks=8, size=256, padding="reflect"),
     "small": dict(width=32, res_blocks=4, size=128, padding="reflect"),
     "cpu": dict(width=56, res_blocks=6, size=128, padding="zero"),
     "tiny": dict(width=8, res_blocks=1, size=32, padding="reflect"),

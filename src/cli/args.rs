@@ -17,9 +17,9 @@ use mvpcc::datagen::synth::Draw;
 use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
 use mvpcc::model::device::{built_backends, DeviceChoice};
-use mvpcc::model::loss::Adversarial;
+use mvpcc::model::loss::{Adversarial, FeaturePlanes, TvScale};
 use mvpcc::model::weights::{read_config, Network};
-use mvpcc::model::{Channels, Formulation, Fusion, Padding};
+use mvpcc::model::{Channels, Dilation, Formulation, Fusion, Padding};
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
@@ -500,9 +500,9 @@ pub struct FilterArgs {
 
 #[derive(Debug, Args)]
 pub struct ProfileArgs {
-    /// Model shape: `builtin` (the one `complete` runs), a preset (cpu, paper, small, tiny) or a
-    /// JSON file holding a model config (as a run's config.json); the options below override
-    /// its fields [default: builtin].
+    /// Model shape: `builtin` (the one `complete` runs), a preset (cpu, paper, original, small,
+    /// tiny) or a JSON file holding a model config (as a run's config.json); the options below
+    /// override its fields [default: builtin].
     #[arg(long)]
     pub config: Option<String>,
     /// Where the network runs (GPUs: docs/gpu.md).
@@ -674,8 +674,10 @@ pub struct TrainArgs {
     #[arg(long, value_enum)]
     pub channels: Option<Channels>,
     /// Model shape: `builtin` (the built-in model's, with fresh weights), a preset (cpu, paper,
-    /// small, tiny) or a JSON file holding a model config (as a run's config.json) [default:
-    /// builtin].
+    /// original, small, tiny) or a JSON file holding a model config (as a run's config.json).
+    /// `paper` follows the paper's text where it and the original code differ, in the network
+    /// and the loss; `original` follows the original code (docs/paper.md, *The presets*)
+    /// [default: builtin].
     #[arg(long)]
     pub config: Option<String>,
     /// View image side in pixels, over the config's (e.g. a 64² model's weights at 128²).
@@ -685,6 +687,14 @@ pub struct TrainArgs {
     /// input images, before the shared encoder; the paper's Table 6) [default: the config's].
     #[arg(long, value_enum)]
     pub fusion: Option<Fusion>,
+    /// Which convolutions are dilated: the encoder's residual blocks (the original code) or the
+    /// decoder's upsampling (the paper's text) [default: the config's].
+    #[arg(long, value_enum)]
+    pub dilation: Option<Dilation>,
+    /// Instance norm after the fusion convolution (the original code: true; the paper's text:
+    /// false) [default: the config's].
+    #[arg(long, value_name = "BOOL")]
+    pub fusion_norm: Option<bool>,
     /// Keep the input's pixels: the generator's output is the input wherever the input has a pixel,
     /// so it learns only the pixels it completes (docs/pipeline.md, *6. The network*) [default: the
     /// config's]
@@ -824,6 +834,15 @@ pub struct TrainArgs {
         train().loss.adversarial_kind.to_possible_value().map_or_else(String::new, |v| v.get_name().to_owned()),
     ))]
     pub adversarial: Option<Adversarial>,
+    /// What the total-variation weight is divided by: side (the original code's S) or pixels
+    /// (the paper's text: S²) [default: side; pixels with --config paper].
+    #[arg(long, value_enum)]
+    pub tv_scale: Option<TvScale>,
+    /// The planes the perceptual and style terms compare through VGG19 (--vgg19): all, or
+    /// colour alone (the paper's text; geometry for a model without colour) [default: all;
+    /// colour with --config paper].
+    #[arg(long, value_enum)]
+    pub feature_planes: Option<FeaturePlanes>,
     #[arg(long, help = defaulted(
         "First learning-rate stage (1-based) with the total-variation term, the original's by default",
         train().tv_from_stage,

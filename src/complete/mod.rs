@@ -33,6 +33,7 @@ use crate::model::inpaint::{InpaintError, Inpainter};
 use crate::model::weights::{generator_in, read_config, Network, NoGenerator, WeightsError};
 use crate::model::{ConfigError, ModelConfig, Preset};
 use crate::views::projection::ViewImages;
+use crate::views::reprojection::ReprojectOptions;
 use burn::tensor::Device;
 use nalgebra::{Matrix3, SymmetricEigen};
 use rayon::prelude::*;
@@ -117,6 +118,9 @@ pub struct Options {
     pub erode: usize,
     /// Median window side over the inpainted views' XYZ.
     pub smooth: usize,
+    /// Re-projected points closer than this (in the network's unit box) to an earlier one are
+    /// dropped; 0 keeps every pixel's point, as the paper re-projects them all.
+    pub dedup: f64,
     /// Move each inpainted pixel's XYZ onto its pixel's ray (see
     /// [`snap_to_rays`](crate::views::reprojection::snap_to_rays)).
     pub snap: bool,
@@ -164,13 +168,15 @@ pub struct Options {
 
 impl Options {
     /// The paper's pipeline and nothing else: the measured points' own box, projection,
-    /// inpainting, 3×3 erosion, re-projection, SOR (k 20, σ 5), back to the input's frame; no
-    /// mirror images, no snapping, the measured points not kept.
+    /// inpainting, 3×3 erosion, re-projection of every pixel, SOR (k 20, σ 5), back to the
+    /// input's frame; no mirror images, no snapping, no merging of near-duplicate points, the
+    /// measured points not kept.
     pub fn paper(up: UpAxis, heading: Option<f64>) -> Options {
         Options {
             up,
             heading,
             roll: Roll::Given(0.0),
+            dedup: 0.0,
             snap: false,
             keep_input: false,
             symmetry: false,
@@ -193,6 +199,7 @@ impl Default for Options {
             views: crate::core::camera::DEFAULT_VIEWS.to_vec(),
             erode: 3,
             smooth: 0,
+            dedup: ReprojectOptions::default().dedup_tolerance,
             snap: true,
             sor: SorParams::default(),
             keep_input: true,
@@ -311,7 +318,7 @@ pub const BUILTIN_SHAPE: &str = "builtin";
 pub enum ShapeError {
     #[error("the built-in model: {0}")]
     Builtin(#[source] WeightsError),
-    #[error("--config {name}: neither {BUILTIN_SHAPE}, a preset (cpu, paper, small, tiny) nor a readable file: {source}")]
+    #[error("--config {name}: neither {BUILTIN_SHAPE}, a preset (cpu, paper, original, small, tiny) nor a readable file: {source}")]
     Unreadable {
         name: String,
         source: std::io::Error,
@@ -323,7 +330,7 @@ pub enum ShapeError {
     },
 }
 
-/// The model shape `name` names: [`BUILTIN_SHAPE`], a preset (`cpu`, `paper`, `small`, `tiny`)
+/// The model shape `name` names: [`BUILTIN_SHAPE`], a preset (`cpu`, `paper`, `original`, `small`, `tiny`)
 /// or a JSON file holding a model config (as a run's config.json).
 pub fn named_shape(name: &str) -> Result<ModelConfig, ShapeError> {
     if name.eq_ignore_ascii_case(BUILTIN_SHAPE) {
@@ -1080,7 +1087,7 @@ mod tests {
     use crate::model::weights::generator_to_bytes;
     use crate::model::{ModelConfig, Preset};
     use crate::views::projection::project;
-    use crate::views::reprojection::{reproject, reproject_keeping, ReprojectOptions};
+    use crate::views::reprojection::{dedup_indices, reproject, reproject_keeping};
     use burn::tensor::Device;
 
     fn options(method: Method) -> Options {
@@ -1171,7 +1178,7 @@ mod tests {
         let done = complete(&input, Some(&inpainter), &options).unwrap();
 
         let (frame, _, inpainted) = paper_views(&input, &inpainter, &options);
-        let eroded = reproject(&inpainted, ReprojectOptions::default());
+        let eroded = reproject(&inpainted, every_pixel());
         let kept = eroded.filter(&inliers(&eroded.positions, SorParams::default()));
         let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
 
@@ -1188,6 +1195,15 @@ mod tests {
         assert_eq!((options.sor.k, options.sor.std_mul), (20, 5.0));
     }
 
+    /// The paper re-projects every pixel of every view: the 3×3 erosion, no merging of
+    /// near-duplicate points.
+    fn every_pixel() -> ReprojectOptions {
+        ReprojectOptions {
+            dedup_tolerance: 0.0,
+            ..ReprojectOptions::default()
+        }
+    }
+
     /// With a model that keeps its input's pixels, the erosion spares them: the paper's steps
     /// with [`reproject_keeping`] in place of [`reproject`], and more points than eroding all.
     #[test]
@@ -1199,14 +1215,13 @@ mod tests {
 
         let (frame, views, inpainted) = paper_views(&input, &inpainter, &options);
         let filtered = |cloud: PointCloud| cloud.filter(&inliers(&cloud.positions, options.sor));
-        let kept = filtered(reproject_keeping(
-            &inpainted,
-            ReprojectOptions::default(),
-            Some(&views),
-        ));
+        let kept = filtered(reproject_keeping(&inpainted, every_pixel(), Some(&views)));
         let expected: Vec<[f64; 3]> = kept.positions.iter().map(|&p| frame.to_input(p)).collect();
         assert_eq!(done.cloud.positions, expected);
-        let eroded = filtered(reproject(&inpainted, ReprojectOptions::default()));
+        // A measured point that two views copy is re-projected twice, as the paper does.
+        let distinct = dedup_indices(&kept.positions, 1e-9).len();
+        assert!(distinct < kept.len(), "{distinct} of {}", kept.len());
+        let eroded = filtered(reproject(&inpainted, every_pixel()));
         assert!(
             eroded.len() < kept.len(),
             "{} vs {}",

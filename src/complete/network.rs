@@ -200,7 +200,7 @@ impl Network<'_> {
         let reproject_options = ReprojectOptions {
             erode: self.options.erode,
             smooth: self.options.smooth,
-            ..ReprojectOptions::default()
+            dedup_tolerance: self.options.dedup,
         };
         let predicted = reproject_keeping(&inpainted, reproject_options, self.copied);
         timings.reprojection += start.elapsed();

@@ -4,7 +4,7 @@
 //! With [`ModelConfig::copies_input`], the output keeps the input's pixels where it has them.
 
 use super::layers::{ConvNorm, ConvSpec, LayerKind, Probe, ResBlock, UpNorm};
-use super::{Fusion, ModelConfig, Padding};
+use super::{Dilation, Fusion, ModelConfig, Padding};
 use burn::module::Module;
 use burn::tensor::activation::relu;
 use burn::tensor::{s, Device, Tensor};
@@ -54,7 +54,10 @@ impl Generator {
             [config.views * 4 * w, 4 * w]
         };
         let fusion = ConvNorm::new(
-            ConvSpec::normalized(fusion_channels, 3, 1, 1, LayerKind::Fusion),
+            ConvSpec {
+                norm: config.normalizes_fusion(),
+                ..ConvSpec::normalized(fusion_channels, 3, 1, 1, LayerKind::Fusion)
+            },
             Padding::Zero,
             device,
         );
@@ -98,8 +101,12 @@ impl Generator {
                 )
             })
             .into();
+        let dilation = match config.dilation() {
+            Dilation::Encoder => 2,
+            Dilation::Decoder => 1,
+        };
         let middle = (0..config.res_blocks)
-            .map(|_| ResBlock::new(4 * w, padding, device))
+            .map(|_| ResBlock::new(4 * w, padding, dilation, device))
             .collect();
         (stem, down, middle)
     }
@@ -114,9 +121,13 @@ impl Generator {
         } else {
             8 * w
         };
+        let dilation = match config.dilation() {
+            Dilation::Encoder => 1,
+            Dilation::Decoder => 2,
+        };
         let up = vec![
-            UpNorm::new([decoder_in, 2 * w], device),
-            UpNorm::new([2 * w, w], device),
+            UpNorm::new([decoder_in, 2 * w], dilation, device),
+            UpNorm::new([2 * w, w], dilation, device),
         ];
         let outputs = config.channels.count() + 1;
         let head = ConvNorm::new(
@@ -291,6 +302,37 @@ mod tests {
             let logits = out.occupancy.into_data().try_into_vec::<f32>().unwrap();
             assert!(logits.iter().all(|v| v.is_finite()));
         }
+    }
+
+    /// `--config paper`'s network (the text's dilation, no norm after fusion) keeps every view's
+    /// size and is built as its config says, which the original's is not.
+    #[test]
+    fn the_texts_network_dilates_its_decoder_and_fuses_without_norm() {
+        let device = Device::flex();
+        let text = Preset::Tiny
+            .config()
+            .with_dilation(Some(Dilation::Decoder))
+            .with_fusion_norm(Some(false));
+        for size in [32, 48] {
+            let config = text.clone().with_size(size);
+            let g = config.init_generator(&device).unwrap();
+            let x = Tensor::<5>::random([1, 4, 7, size, size], Distribution::Default, &device);
+            let out = g.forward(x);
+            assert_eq!(out.images.dims(), [1, 4, 6, size, size]);
+        }
+        // The layers as built, in their debug form: where the dilation 2 is, and whether the
+        // fusion convolution has its norm.
+        let built = |config: &ModelConfig| {
+            let g = config.init_generator(&device).unwrap();
+            let dilated = |part: String| part.matches("dilation: [2, 2]").count();
+            (
+                dilated(format!("{:?}", g.middle)),
+                dilated(format!("{:?}", g.up)),
+                format!("{:?}", g.fusion).contains("norm: None"),
+            )
+        };
+        assert_eq!(built(&text), (0, 2, true));
+        assert_eq!(built(&Preset::Tiny.config()), (1, 0, false));
     }
 
     /// A config asking for the copy builds it. Where the input has a pixel the output is the

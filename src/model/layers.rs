@@ -350,11 +350,21 @@ pub struct UpNorm {
 }
 
 impl UpNorm {
-    pub fn new(channels: [usize; 2], device: &Device) -> UpNorm {
+    /// With `dilation` 2 (the paper's text) the kernel spans 7 pixels, so the padding that keeps
+    /// the output at twice the input is 3 with one more row and column at the end.
+    pub fn new(channels: [usize; 2], dilation: usize, device: &Device) -> UpNorm {
+        // (h − 1)·2 − 2·pad + dilation·3 + 1 + extra = 2h
+        let (pad, extra) = match dilation {
+            1 => (1, 0),
+            2 => (3, 1),
+            _ => unreachable!("the decoder is dilated by 1 or 2"),
+        };
         UpNorm {
             conv: ConvTranspose2dConfig::new(channels, [4, 4])
                 .with_stride([2, 2])
-                .with_padding([1, 1])
+                .with_dilation([dilation; 2])
+                .with_padding([pad; 2])
+                .with_padding_out([extra; 2])
                 .with_initializer(gan_init())
                 .init(device),
             norm: InstanceNormConfig::new(channels[1])
@@ -374,7 +384,8 @@ impl UpNorm {
     }
 }
 
-/// `x + IN(conv3×3(ReLU(IN(conv3×3 dilated 2(x)))))`, the original's dilated residual block.
+/// `x + IN(conv3×3(ReLU(IN(conv3×3 dilated d(x)))))`: the original's dilated residual block
+/// with `d` 2, the paper's text's plain one with `d` 1.
 #[derive(Module, Debug)]
 pub struct ResBlock {
     dilated: ConvNorm,
@@ -382,7 +393,7 @@ pub struct ResBlock {
 }
 
 impl ResBlock {
-    pub fn new(channels: usize, padding: Padding, device: &Device) -> ResBlock {
+    pub fn new(channels: usize, padding: Padding, dilation: usize, device: &Device) -> ResBlock {
         let spec = |dilation| ConvSpec {
             channels: [channels; 2],
             kernel: 3,
@@ -393,7 +404,7 @@ impl ResBlock {
             kind: LayerKind::ConvResidual,
         };
         ResBlock {
-            dilated: ConvNorm::new(spec(2), padding, device),
+            dilated: ConvNorm::new(spec(dilation), padding, device),
             plain: ConvNorm::new(spec(1), padding, device),
         }
     }
@@ -636,8 +647,8 @@ mod tests {
                 padding,
                 &device,
             );
-            let block = ResBlock::new(2 * planes, padding, &device);
-            let up = UpNorm::new([2 * planes, planes], &device);
+            let block = ResBlock::new(2 * planes, padding, 2, &device);
+            let up = UpNorm::new([2 * planes, planes], 1, &device);
             let run = |formulation: Formulation| {
                 formulation.set();
                 let y = head.forward(input.clone(), &mut NoProbe);
@@ -673,7 +684,7 @@ mod tests {
             (y.detach(), dx)
         };
         for padding in [Padding::Reflect, Padding::Zero] {
-            let block = ResBlock::new(planes, padding, &device);
+            let block = ResBlock::new(planes, padding, 2, &device);
             assert!(block.dilated.shifted && block.plain.shifted);
             let head = ConvNorm::new(
                 ConvSpec::normalized([7, planes], 7, 1, 3, LayerKind::Conv7x7),
@@ -715,7 +726,7 @@ mod tests {
     fn reflect_and_zero_padding_keep_the_size() {
         let device = Device::flex();
         for padding in [Padding::Reflect, Padding::Zero] {
-            let block = ResBlock::new(4, padding, &device);
+            let block = ResBlock::new(4, padding, 2, &device);
             let x = Tensor::<4>::random([2, 4, 9, 9], Distribution::Default, &device);
             assert_eq!(block.forward(x, &mut NoProbe).dims(), [2, 4, 9, 9]);
         }

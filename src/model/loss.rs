@@ -26,9 +26,19 @@ pub struct LossWeights {
     /// BCE between the predicted and the true occupancy.
     #[config(default = 0.1)]
     pub occupancy: f64,
-    /// Total variation of the geometry planes, further divided by the image side `S`.
+    /// Total variation of the geometry planes, further divided by [`LossWeights::tv_scale`].
     #[config(default = 0.1)]
     pub tv: f64,
+    /// What the total-variation weight is divided by: the original code's image side, or the
+    /// text's pixel count (λ6 = 0.1/S, S = 256×256).
+    #[config(default = "TvScale::Side")]
+    pub tv_scale: TvScale,
+    /// The planes the perceptual and style terms compare through VGG19: all (the original
+    /// code's, as RGB triples) or the colour alone (the text's; the geometry of a model
+    /// without colour, as the text does for its XYZ-only model). The discriminator's features
+    /// see every plane at once whatever this says.
+    #[config(default = "FeaturePlanes::All")]
+    pub feature_planes: FeaturePlanes,
     /// Smooth L1 on each occupied pixel's depth along its camera's axis, divided by the
     /// foreground fraction. Not the original's: `complete` keeps only that depth of a completed
     /// pixel's XYZ (it moves the point onto the pixel's ray, `snap_to_rays`), so this term
@@ -51,6 +61,46 @@ impl LossWeights {
 
     fn compares_features(&self) -> bool {
         self.perceptual != 0.0 || self.style != 0.0
+    }
+}
+
+/// What the total-variation weight is divided by ([`LossWeights::tv_scale`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum TvScale {
+    /// The view's side `S` (the original code).
+    Side,
+    /// The view's pixels `S²` (the paper's text).
+    Pixels,
+}
+
+impl TvScale {
+    fn divisor(self, side: usize) -> f64 {
+        match self {
+            TvScale::Side => side as f64,
+            TvScale::Pixels => (side * side) as f64,
+        }
+    }
+}
+
+/// Which planes VGG19 sees for the perceptual and style terms ([`LossWeights::feature_planes`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FeaturePlanes {
+    /// Every plane, as RGB triples (the original code).
+    All,
+    /// The colour planes alone, or the geometry of a model without colour (the paper's text).
+    Colour,
+}
+
+impl FeaturePlanes {
+    /// The planes of `[B, V, C, S, S]` images that these are.
+    fn of(self, images: Tensor<5>) -> Tensor<5> {
+        let channels = images.dims()[2];
+        match self {
+            FeaturePlanes::All => images,
+            FeaturePlanes::Colour => images.narrow(2, channels.saturating_sub(3), 3),
+        }
     }
 }
 
@@ -283,7 +333,8 @@ pub fn generator_losses(
         + perceptual.clone().mul_scalar(weights.perceptual)
         + style.clone().mul_scalar(weights.style)
         + occupancy.clone().mul_scalar(weights.occupancy)
-        + tv.clone().mul_scalar(weights.tv / s as f64)
+        + tv.clone()
+            .mul_scalar(weights.tv / weights.tv_scale.divisor(s))
         + depth.clone().mul_scalar(weights.depth);
     GeneratorLosses {
         l1,
@@ -322,7 +373,7 @@ fn critics_losses(
         _ => zero(),
     };
     let (perceptual, style) = match (weights.compares_features(), vgg, &fake) {
-        (true, Some(vgg), _) => vgg_losses(vgg, output, probability, target),
+        (true, Some(vgg), _) => vgg_losses(vgg, output, probability, target, weights),
         (true, None, Some(fake)) => (
             self::perceptual(&fake.features, real_features),
             self::style(&fake.features, real_features),
@@ -343,10 +394,12 @@ fn vgg_losses(
     output: &GeneratorOutput,
     probability: Tensor<5>,
     target: &Target,
+    weights: &LossWeights,
 ) -> (Tensor<1>, Tensor<1>) {
-    let fake = vgg.forward(as_rgb(output.images.clone() * probability));
+    let planes = |images: Tensor<5>| as_rgb(weights.feature_planes.of(images));
+    let fake = vgg.forward(planes(output.images.clone() * probability));
     let real: Vec<Tensor<4>> = vgg
-        .forward(as_rgb(target.images.clone() * target.occupancy.clone()))
+        .forward(planes(target.images.clone() * target.occupancy.clone()))
         .into_iter()
         .map(|f| f.detach())
         .collect();
@@ -386,6 +439,23 @@ mod tests {
 
     fn close(a: f64, b: f64) {
         assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+    }
+
+    /// The text's scale divides the total-variation weight by the pixels, the original's by the
+    /// side; the colour planes alone are those after the geometry (or the geometry alone).
+    #[test]
+    fn the_texts_tv_scale_and_feature_planes() {
+        assert_eq!(TvScale::Side.divisor(256), 256.0);
+        assert_eq!(TvScale::Pixels.divisor(256), 65536.0);
+        let device = Device::flex();
+        let planes = |c: usize| {
+            let values: Vec<f32> = (0..c).map(|k| k as f32).collect();
+            Tensor::<5>::from_data(TensorData::new(values, [1, 1, c, 1, 1]), &device)
+        };
+        let picked = |t: Tensor<5>| t.into_data().try_into_vec::<f32>().unwrap();
+        assert_eq!(picked(FeaturePlanes::Colour.of(planes(6))), [3.0, 4.0, 5.0]);
+        assert_eq!(picked(FeaturePlanes::Colour.of(planes(3))), [0.0, 1.0, 2.0]);
+        assert_eq!(picked(FeaturePlanes::All.of(planes(6))).len(), 6);
     }
 
     #[test]

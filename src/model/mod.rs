@@ -71,6 +71,18 @@ pub enum Fusion {
     Early,
 }
 
+/// Where the generator's dilated convolutions are (the text and the original code disagree).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Dilation {
+    /// The first convolution of each encoder residual block, dilation 2: the original code.
+    #[default]
+    Encoder,
+    /// The decoder's two upsampling convolutions, dilation 2, and no dilation in the residual
+    /// blocks: the paper's text (§3.2: "upsampled … using dilated convolutions").
+    Decoder,
+}
+
 /// Shape of the generator and discriminator. Saved inside every weights file.
 #[derive(Config, Debug, PartialEq)]
 pub struct ModelConfig {
@@ -103,13 +115,25 @@ pub struct ModelConfig {
     /// validation split for these weights; `None` is one half, as in every weights file
     /// written before the choice existed (see [`ModelConfig::occupancy_threshold`]).
     pub occupancy: Option<f64>,
+    /// `Some(Dilation::Decoder)` for the text's dilation; `None` is the original's, as in every
+    /// weights file written before the choice existed (see [`ModelConfig::dilation`]).
+    pub dilation: Option<Dilation>,
+    /// `Some(false)`: the fusion convolution is followed by its ReLU alone, as the text says;
+    /// `None` is instance norm before the ReLU, as the original code and every weights file
+    /// written before the choice existed (see [`ModelConfig::normalizes_fusion`]).
+    pub fusion_norm: Option<bool>,
 }
 
 /// Named model shapes; `mvpcc profile` and `mvpcc train` take these names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Preset {
-    /// The paper's network: w 64, r 8, S 256, V 4 (434 GFLOP per object).
+    /// The paper's network as its text describes it: w 64, r 8, S 256, V 4 (434 GFLOP per
+    /// object), dilation in the decoder, no norm after the fusion convolution; with `train`,
+    /// the text's loss too ([`Preset::loss`]).
     Paper,
+    /// The paper's network as the original code builds it (dilated residual blocks, instance
+    /// norm after the fusion convolution), with its `config.yml` loss.
+    Original,
     /// w 56, r 6, S 128, zero padding: chosen by measurement (see
     /// lab/2026-11-22-network-cpu-forward) as the largest whose whole `complete` stayed within a
     /// second on two cores (2026-12-01), and `train`'s default until it took the built-in model's
@@ -125,7 +149,10 @@ impl Preset {
     pub fn config(self) -> ModelConfig {
         let base = ModelConfig::new();
         match self {
-            Preset::Paper => base,
+            Preset::Paper => base
+                .with_dilation(Some(Dilation::Decoder))
+                .with_fusion_norm(Some(false)),
+            Preset::Original => base,
             Preset::Cpu => base
                 .with_width(56)
                 .with_res_blocks(6)
@@ -138,6 +165,29 @@ impl Preset {
                 .with_size(32)
                 .with_disc_width(8),
         }
+    }
+}
+
+impl Preset {
+    /// The loss a run of this preset trains with unless options say otherwise: the text's for
+    /// `paper` (docs/paper.md, *The presets*), the original code's `config.yml` for the rest.
+    pub fn loss(self) -> loss::LossWeights {
+        let original = loss::LossWeights::new();
+        match self {
+            Preset::Paper => original
+                .with_perceptual(250.0)
+                .with_style(0.1)
+                .with_tv_scale(loss::TvScale::Pixels)
+                .with_feature_planes(loss::FeaturePlanes::Colour)
+                .with_adversarial_kind(loss::Adversarial::NonSaturating),
+            _ => original,
+        }
+    }
+
+    /// Whether the perceptual and style terms of this preset are VGG19's, as in the paper and
+    /// the original code (`train --vgg19 FILE`; mvpcc neither ships nor fetches the weights).
+    pub fn wants_vgg19(self) -> bool {
+        matches!(self, Preset::Paper | Preset::Original)
     }
 }
 
@@ -183,7 +233,7 @@ impl ModelConfig {
     /// 2 residual blocks, xyzrgb, zero padding".
     pub fn describe(&self) -> String {
         let count = |n: usize, one: &str| format!("{n} {one}{}", if n == 1 { "" } else { "s" });
-        format!(
+        let shape = format!(
             "{} of {}², width {}, {}, {:?}, {:?} padding",
             count(self.views, "view"),
             self.size,
@@ -192,7 +242,15 @@ impl ModelConfig {
             self.channels,
             self.padding
         )
-        .to_lowercase()
+        .to_lowercase();
+        // Only what differs from the original's network is named, so existing logs read as before.
+        let text = [
+            (self.dilation() == Dilation::Decoder, ", dilated decoder"),
+            (!self.normalizes_fusion(), ", fusion without norm"),
+        ];
+        text.into_iter()
+            .filter(|(differs, _)| *differs)
+            .fold(shape, |s, (_, words)| s + words)
     }
 
     /// Sizes the layers cannot work with: the two stride-2 stages and the discriminator's
@@ -234,6 +292,15 @@ impl ModelConfig {
 
     pub fn fusion(&self) -> Fusion {
         self.fusion.unwrap_or_default()
+    }
+
+    pub fn dilation(&self) -> Dilation {
+        self.dilation.unwrap_or_default()
+    }
+
+    /// Whether instance norm follows the fusion convolution.
+    pub fn normalizes_fusion(&self) -> bool {
+        self.fusion_norm.unwrap_or(true)
     }
 
     /// Sets the fusion, written as `None` when late so that configs compare equal to files
@@ -320,6 +387,7 @@ impl ModelConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::BTreeMap;
 
     #[test]
     fn a_shape_is_described_in_words() {
@@ -327,7 +395,7 @@ mod tests {
             Preset::Tiny.config().describe(),
             "4 views of 32², width 8, 1 residual block, xyzrgb, reflect padding"
         );
-        let one_view = Preset::Paper
+        let one_view = Preset::Original
             .config()
             .with_views(1)
             .with_channels(Channels::Xyz);
@@ -335,6 +403,100 @@ mod tests {
             one_view.describe(),
             "1 view of 256², width 64, 8 residual blocks, xyz, reflect padding"
         );
+        assert_eq!(
+            Preset::Paper.config().describe(),
+            "4 views of 256², width 64, 8 residual blocks, xyzrgb, reflect padding, \
+             dilated decoder, fusion without norm"
+        );
+    }
+
+    /// Every setting of a preset's network and loss by name (`model.width`, `loss.style`),
+    /// with the defaults that `None` stands for written out.
+    fn settings(preset: Preset) -> BTreeMap<String, serde_json::Value> {
+        let c = preset.config();
+        let model = c
+            .clone()
+            .with_fusion(Some(c.fusion()))
+            .with_dilation(Some(c.dilation()))
+            .with_fusion_norm(Some(c.normalizes_fusion()));
+        let mut all = BTreeMap::new();
+        let parts = [
+            ("model", serde_json::to_value(model).unwrap()),
+            ("loss", serde_json::to_value(preset.loss()).unwrap()),
+        ];
+        for (part, value) in parts {
+            for (key, v) in value.as_object().unwrap() {
+                all.insert(format!("{part}.{key}"), v.clone());
+            }
+        }
+        all.insert("vgg19".into(), preset.wants_vgg19().into());
+        all
+    }
+
+    /// The rows of docs/paper.md's preset table: setting → (`--config paper`'s cell,
+    /// `--config original`'s cell), backticks removed.
+    fn preset_table() -> BTreeMap<String, [String; 2]> {
+        let doc = include_str!("../../docs/paper.md");
+        let start = doc
+            .find("### The presets")
+            .expect("docs/paper.md has *The presets*");
+        let code = |cell: &str| cell.trim().trim_matches('`').to_string();
+        doc[start..]
+            .lines()
+            .skip_while(|l| !l.starts_with("| setting"))
+            .skip(2)
+            .take_while(|l| l.starts_with('|'))
+            .map(|row| {
+                let cells: Vec<&str> = row.trim_matches('|').split('|').collect();
+                assert_eq!(cells.len(), 5, "a row of five cells: {row}");
+                (code(cells[0]), [code(cells[3]), code(cells[4])])
+            })
+            .collect()
+    }
+
+    fn matches(cell: &str, value: &serde_json::Value) -> bool {
+        match value {
+            serde_json::Value::Number(n) => cell.parse::<f64>().ok() == n.as_f64(),
+            serde_json::Value::String(s) => cell == s,
+            other => {
+                serde_json::from_str::<serde_json::Value>(cell)
+                    .ok()
+                    .as_ref()
+                    == Some(other)
+            }
+        }
+    }
+
+    #[test]
+    fn the_paper_and_original_presets_differ_exactly_where_docs_paper_md_says() {
+        let (paper, original) = (settings(Preset::Paper), settings(Preset::Original));
+        assert_eq!(
+            paper.keys().collect::<Vec<_>>(),
+            original.keys().collect::<Vec<_>>()
+        );
+        let differing: Vec<&String> = paper.keys().filter(|k| paper[*k] != original[*k]).collect();
+        let table = preset_table();
+        assert_eq!(
+            table.keys().collect::<Vec<_>>(),
+            differing,
+            "the table's settings are the ones the presets differ in"
+        );
+        for (key, [in_paper, in_original]) in &table {
+            assert!(
+                matches(in_paper, &paper[key]),
+                "{key}: {in_paper} vs {}",
+                paper[key]
+            );
+            assert!(
+                matches(in_original, &original[key]),
+                "{key}: {in_original} vs {}",
+                original[key]
+            );
+        }
+        // The original preset is mvpcc's defaults at the paper's size: the table is everything
+        // `--config paper` changes.
+        assert_eq!(Preset::Original.loss(), loss::LossWeights::new());
+        assert_eq!(Preset::Original.config(), ModelConfig::new());
     }
 
     #[test]

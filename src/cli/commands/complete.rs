@@ -176,6 +176,7 @@ fn options(args: &CompleteArgs, input: &Path, tuning: Tuning) -> Options {
         views: args.views.0.clone(),
         erode: args.erode,
         smooth: args.smooth,
+        dedup: Options::default().dedup,
         snap: !args.no_snap,
         sor,
         keep_input: !args.no_keep_input,

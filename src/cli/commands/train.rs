@@ -6,10 +6,11 @@ use crate::cli::args::TrainArgs;
 use crate::cli::streams::{say, tell};
 use mvpcc::complete::{named_shape, BUILTIN_SHAPE};
 
+use clap::ValueEnum;
 use indicatif::ProgressBar;
 use mvpcc::model::device::{open_list, Backend};
 use mvpcc::model::gan::StepLosses;
-use mvpcc::model::ModelConfig;
+use mvpcc::model::{Dilation, ModelConfig, Preset};
 use mvpcc::train::dataset::scan_split;
 use mvpcc::train::{resume, train, InitWeights, Job, LogRecord, Monitor, Summary, TrainSettings};
 use std::path::{Path, PathBuf};
@@ -44,6 +45,8 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
         *weight = arg.unwrap_or(*weight);
     }
     loss.adversarial_kind = args.adversarial.unwrap_or(loss.adversarial_kind);
+    loss.tv_scale = args.tv_scale.unwrap_or(loss.tv_scale);
+    loss.feature_planes = args.feature_planes.unwrap_or(loss.feature_planes);
     if let Some(lr) = args.lr {
         s.stage_rates = vec![lr, lr / 10.0, lr / 100.0];
     }
@@ -60,6 +63,20 @@ fn apply(args: &TrainArgs, mut s: TrainSettings) -> TrainSettings {
         s.augment.color_jitter = j;
     }
     s
+}
+
+/// The preset `--config` names, if it names one.
+fn preset(config: Option<&str>) -> Option<Preset> {
+    config.and_then(|name| <Preset as ValueEnum>::from_str(name, true).ok())
+}
+
+/// The defaults of a new run: a preset's loss where `--config` names one.
+fn preset_settings(config: Option<&str>) -> TrainSettings {
+    let mut settings = TrainSettings::default();
+    if let Some(preset) = preset(config) {
+        settings.loss = preset.loss();
+    }
+    settings
 }
 
 fn check(settings: &TrainSettings, model: &ModelConfig) -> anyhow::Result<()> {
@@ -81,6 +98,15 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             Some(p) => base.with_occupancy(Some(p)),
             None => base,
         };
+        let base = match args.dilation {
+            // Written as `None` when the original's, as `with_fusion_kind` does.
+            Some(d) => base.with_dilation((d == Dilation::Decoder).then_some(d)),
+            None => base,
+        };
+        let base = match args.fusion_norm {
+            Some(norm) => base.with_fusion_norm((!norm).then_some(false)),
+            None => base,
+        };
         if args.input_copy {
             base.with_input_copy_kind(true)
         } else {
@@ -98,7 +124,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
         resume::check_unchanged(run, &saved, &settings, &model)?;
         (settings, model)
     } else {
-        let mut settings = apply(args, TrainSettings::default());
+        let mut settings = apply(args, preset_settings(args.config.as_deref()));
         settings.init = args
             .init
             .as_deref()
@@ -221,6 +247,19 @@ pub fn run(args: TrainArgs, log: Log) -> anyhow::Result<()> {
         model.describe(),
         run.display()
     ));
+
+    let features_terms = settings.loss.perceptual != 0.0 || settings.loss.style != 0.0;
+    if let Some(p) = preset(args.config.as_deref()).filter(|p| p.wants_vgg19()) {
+        if settings.vgg19.is_none() && features_terms && !args.resume {
+            log.warn(format!(
+                "--config {}: its perceptual and style terms are VGG19's, which mvpcc does not \
+                 ship; without --vgg19 FILE they compare the discriminator's features of every \
+                 plane (docs/paper.md, *The presets*)",
+                p.to_possible_value()
+                    .map_or_else(String::new, |v| v.get_name().to_owned())
+            ));
+        }
+    }
 
     if opened.backend == Backend::Wgpu
         && settings.loss.needs_discriminator(settings.vgg19.is_some())

@@ -241,6 +241,30 @@ fn a_run_starts_from_another_runs_weights_and_refuses_other_shapes() {
         .stderr(predicate::str::contains("cannot be used with"));
 }
 
+/// `--init COLOUR --channels xyz` starts a geometry-only run from a colour model's weights (the
+/// colour planes' weights dropped) with a fresh discriminator; the other way round is refused.
+#[test]
+fn a_geometry_only_run_starts_from_a_colour_models_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let (colour, xyz) = (dir.path().join("colour"), dir.path().join("xyz"));
+    train(&colour, 2, &[]).assert().success();
+    base(&xyz)
+        .args(["--init", s(&colour), "--channels", "xyz", "--steps", "1"])
+        .args(["--val-every", "0", "--seen-samples", "0", "--batch", "2"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("discriminator.safetensors").not());
+    let bytes = std::fs::read(xyz.join("generator.safetensors")).unwrap();
+    let (_, config) = generator_from_bytes(&bytes, &Device::flex()).unwrap();
+    assert_eq!(config.channels, mvpcc::model::Channels::Xyz);
+    let settings = std::fs::read_to_string(xyz.join("train.json")).unwrap();
+    assert!(settings.contains("\"discriminator\": null"), "{settings}");
+
+    let mut back = base(&dir.path().join("back"));
+    back.args(["--init", s(&xyz), "--channels", "xyzrgb", "--steps", "1"]);
+    refused_for_its_config(&mut back);
+}
+
 #[test]
 fn a_fresh_run_takes_the_built_in_models_shape_unless_told_otherwise() {
     let dir = tempfile::tempdir().unwrap();

@@ -709,7 +709,8 @@ pub struct TrainArgs {
     /// a run directory (its generator.safetensors, and discriminator.safetensors when there) or
     /// a folder holding model.safetensors and, when there, discriminator.safetensors (as
     /// assets/). The model config is the weights' own unless --config gives one; only --size
-    /// and --input-copy may differ from it.
+    /// and --input-copy may differ from it, and --channels xyz from a colour model's (its colour
+    /// weights dropped, a fresh discriminator).
     #[arg(long, conflicts_with = "resume")]
     pub init: Option<PathBuf>,
     /// The discriminator's weights to start from with --init, over the one --init finds.

@@ -12,9 +12,78 @@
 //! so the depth stays the narrow network's.
 
 use super::weights::{self, WeightsError};
-use super::{Fusion, Generator, ModelConfig};
+use super::{Channels, Fusion, Generator, ModelConfig};
 use burn::tensor::Device;
 use std::collections::BTreeMap;
+
+/// A geometry-only generator (`Channels::Xyz`) from the weights of a colour one of the same
+/// shape: every layer keeps its weights but the input convolution, which forgets the colour
+/// planes' weights, and the head, which stops writing colour. On an input without colour (its
+/// colour planes zero) it computes the colour network's geometry and occupancy exactly, so a run
+/// goes on from what the colour model learned instead of from nothing (the paper's Tables 1–2
+/// and 7–8 are its XYZ-only model's). Late fusion only: early fusion's fusion convolution reads
+/// the colour planes too.
+pub fn generator_without_colour(
+    bytes: &[u8],
+    config: &ModelConfig,
+    device: &Device,
+) -> Result<Generator, WeightsError> {
+    let coloured = weights::read_config(bytes, weights::Network::Generator)?;
+    colour_droppable(&coloured, config)?;
+    let mut geometry = config.init_generator(device)?;
+    let mut fresh = weights::generator_to_bytes(&geometry, config)?;
+    let old = Tensors::parse(bytes)?;
+    let new = Tensors::parse(&fresh)?;
+    let mut values = new.values(&fresh);
+    // XYZ, RGB, occupancy in; XYZ, RGB, occupancy logit out: the geometry and the last plane stay.
+    let planes = [0, 1, 2, coloured.channels.count()];
+    for (name, (shape, _)) in &new.0 {
+        let (old_shape, old_values) = old.values_of(bytes, name)?;
+        let axis = match name.as_str() {
+            _ if old_shape == *shape => None,
+            "stem.conv.weight" => Some(1),
+            "head.conv.weight" | "head.conv.bias" => Some(0),
+            _ => return Err(WeightsError::Tensors(format!("{name}: unexpected shape"))),
+        };
+        let value = values.get_mut(name).ok_or_else(|| missing(name))?;
+        value.1 = match axis {
+            None => old_values,
+            Some(axis) => select(&old_shape, &old_values, axis, &planes),
+        };
+    }
+    new.write(&mut fresh, &values);
+    weights::apply(&mut geometry, &fresh)?;
+    Ok(geometry)
+}
+
+/// Whether `coloured`'s weights can start the geometry-only network `config`
+/// ([`generator_without_colour`]): the same network, late fusion, but for the colour.
+pub fn colour_droppable(coloured: &ModelConfig, config: &ModelConfig) -> Result<(), WeightsError> {
+    let late = coloured.fusion() == Fusion::Late;
+    if coloured.channels != Channels::Xyzrgb || config.channels != Channels::Xyz || !late {
+        return Err(WeightsError::ConfigMismatch {
+            expected: "a late-fusion xyzrgb generator for an xyz run".into(),
+            found: serde_json::to_string(coloured).unwrap_or_default(),
+        });
+    }
+    let same = coloured.clone().with_channels(Channels::Xyz);
+    weights::compatible(&same, config)
+}
+
+/// The entries of a row-major tensor of `shape` whose index along `axis` is one of `kept`, in
+/// that order along the axis.
+fn select(shape: &[usize], values: &[f32], axis: usize, kept: &[usize]) -> Vec<f32> {
+    let outer: usize = shape[..axis].iter().product();
+    let inner: usize = shape[axis + 1..].iter().product();
+    let mut out = Vec::with_capacity(outer * kept.len() * inner);
+    for o in 0..outer {
+        for &k in kept {
+            let start = (o * shape[axis] + k) * inner;
+            out.extend_from_slice(&values[start..start + inner]);
+        }
+    }
+    out
+}
 
 /// Runs of channels along one tensor dimension: `(narrow count, wide count)` each, in order
 /// (the fusion convolution reads one run per view, for example).
@@ -317,6 +386,37 @@ mod tests {
     #[test]
     fn a_widened_early_fusion_generator_starts_as_the_narrow_one() {
         widened_matches(Preset::Tiny.config().with_fusion_kind(Fusion::Early), 12);
+    }
+
+    /// Without colour in its input the narrowed generator is the colour one's geometry and
+    /// occupancy; an early-fusion or geometry-only source is refused.
+    #[test]
+    fn a_generator_without_colour_starts_as_the_colour_ones_geometry() {
+        let device = Device::flex();
+        let coloured = Preset::Tiny.config();
+        let g = coloured.init_generator(&device).unwrap();
+        let bytes = weights::generator_to_bytes(&g, &coloured).unwrap();
+        let xyz = coloured.clone().with_channels(Channels::Xyz);
+        let narrowed = generator_without_colour(&bytes, &xyz, &device).unwrap();
+        let geometry = Tensor::<5>::random([2, 4, 3, 32, 32], Distribution::Default, &device);
+        let mask = Tensor::<5>::random([2, 4, 1, 32, 32], Distribution::Default, &device)
+            .greater_elem(0.5)
+            .float();
+        let no_colour = Tensor::zeros([2, 4, 3, 32, 32], &device);
+        let with_colour = Tensor::cat(vec![geometry.clone(), no_colour, mask.clone()], 2);
+        let (a, b) = (
+            g.forward(with_colour),
+            narrowed.forward(Tensor::cat(vec![geometry, mask], 2)),
+        );
+        let diff = |p: Tensor<5>, q: Tensor<5>| value(p.sub(q).abs().max());
+        assert!(diff(a.images.narrow(2, 0, 3), b.images) < 1e-5);
+        assert!(diff(a.occupancy, b.occupancy) < 1e-4);
+
+        let early = coloured.clone().with_fusion_kind(Fusion::Early);
+        let xyz_early = early.clone().with_channels(Channels::Xyz);
+        assert!(colour_droppable(&early, &xyz_early).is_err());
+        assert!(colour_droppable(&xyz, &xyz).is_err());
+        assert!(colour_droppable(&coloured, &xyz.clone().with_width(9)).is_err());
     }
 
     #[test]

@@ -18,7 +18,7 @@ use crate::io::atomic_write;
 use crate::model::gan::{Gan, GanOptimConfig, StepLosses};
 use crate::model::inpaint::Inpainter;
 use crate::model::loss::LossWeights;
-use crate::model::{weights, widen, ModelConfig};
+use crate::model::{weights, widen, Channels, ModelConfig};
 use burn::module::Module;
 use burn::tensor::Device;
 use checkpoint::{CheckpointError, TrainState, DISCRIMINATOR_WEIGHTS};
@@ -143,11 +143,14 @@ impl InitWeights {
         ];
         for (path, network) in files {
             let Some(path) = path else { continue };
-            let widened = self.widen && network == weights::Network::Generator;
+            let generator = network == weights::Network::Generator;
             weights::read_config(&read_file(path)?, network)
-                .and_then(|found| match widened {
-                    true => widen::widenable(&found, config),
-                    false => weights::compatible(&found, config),
+                .and_then(|found| match (generator, self.widen) {
+                    (true, true) => widen::widenable(&found, config),
+                    (true, false) if drops_colour(&found, config) => {
+                        widen::colour_droppable(&found, config)
+                    }
+                    _ => weights::compatible(&found, config),
                 })
                 .map_err(|source| TrainError::Weights {
                     path: path.clone(),
@@ -170,8 +173,13 @@ impl InitWeights {
             }
         };
         let bytes = read_file(&self.generator)?;
+        let found = weights::read_config(&bytes, weights::Network::Generator)
+            .map_err(fail(&self.generator))?;
         let generator = match self.widen {
             true => widen::generator_widened(&bytes, config, device),
+            false if drops_colour(&found, config) => {
+                widen::generator_without_colour(&bytes, config, device)
+            }
             false => weights::generator_for(&bytes, config, device),
         }
         .map_err(fail(&self.generator))?;
@@ -194,6 +202,12 @@ impl InitWeights {
             job.settings.optim.clone(),
         ))
     }
+}
+
+/// Whether a run of `config` starting from weights of `found` leaves their colour behind
+/// (`train --init COLOUR_MODEL --channels xyz`, [`widen::generator_without_colour`]).
+pub fn drops_colour(found: &ModelConfig, config: &ModelConfig) -> bool {
+    found.channels == Channels::Xyzrgb && config.channels == Channels::Xyz
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>, TrainError> {

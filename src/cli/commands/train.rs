@@ -12,7 +12,9 @@ use mvpcc::model::device::{open_list, Backend};
 use mvpcc::model::gan::StepLosses;
 use mvpcc::model::{Dilation, ModelConfig, Preset};
 use mvpcc::train::dataset::scan_split;
-use mvpcc::train::{resume, train, InitWeights, Job, LogRecord, Monitor, Summary, TrainSettings};
+use mvpcc::train::{
+    drops_colour, resume, train, InitWeights, Job, LogRecord, Monitor, Summary, TrainSettings,
+};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -113,7 +115,7 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
             base
         }
     };
-    let (settings, mut model) = if args.resume {
+    let (mut settings, mut model) = if args.resume {
         let saved = resume::saved(run)?;
         let settings = apply(args, saved.0.clone());
         let model = match &args.config {
@@ -147,7 +149,12 @@ fn resolve(args: &TrainArgs, run: &Path) -> anyhow::Result<(TrainSettings, Model
     };
     model.views = settings.views.len();
     check(&settings, &model)?;
-    if let Some(init) = settings.init.as_ref().filter(|_| !args.resume) {
+    if let Some(init) = settings.init.as_mut().filter(|_| !args.resume) {
+        // The discriminator beside colour weights judges colour: a geometry-only run starts a
+        // fresh one unless --init-discriminator names one.
+        if args.init_discriminator.is_none() && drops_colour(&init.config()?, &model) {
+            init.discriminator = None;
+        }
         init.check(&model)?;
     }
     Ok((settings, model))

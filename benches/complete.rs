@@ -104,6 +104,7 @@ fn complete_file(input: &Path, output: &Path, completer: &Completer, options: &O
         completer,
         settings: &settings,
         files: FileOptions::default(),
+        scene: None,
     };
     app::complete::complete_file(input, output, None, &job).unwrap();
 }

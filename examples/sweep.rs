@@ -87,6 +87,7 @@ fn measure(
         completer,
         settings: &settings,
         files: FileOptions::default(),
+        scene: None,
     };
     let layout = Layout {
         root: data.to_path_buf(),

@@ -25,5 +25,6 @@ pub mod datagen;
 pub mod io;
 pub mod metrics;
 pub mod model;
+pub mod scene;
 pub mod train;
 pub mod views;

@@ -15,6 +15,10 @@ use crate::io::{
     atomic_write, check_output, non_finite_warning, read_cloud, same_file, unwritten, write_cloud,
     CloudIoError, Encoding, Format, Problem,
 };
+use crate::scene::{
+    complete_scene, find_objects, SceneError, SceneParams, Selection, VehicleReport, Verdict,
+    CLASSIFICATION,
+};
 use crate::views::{write_views, ViewError};
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
@@ -56,6 +60,8 @@ pub enum FileError {
     ViewsNotADirectory(PathBuf),
     #[error("{}: --save-views names an output file", .0.display())]
     ViewsIsOutput(PathBuf),
+    #[error("{}: {source}", path.display())]
+    Scene { path: PathBuf, source: SceneError },
 }
 
 #[derive(Debug, Error)]
@@ -102,6 +108,26 @@ pub struct Job<'a> {
     pub completer: &'a Completer,
     pub settings: &'a (dyn Fn(&Path) -> Settings + Sync),
     pub files: FileOptions,
+    /// Each file is a whole street scan whose vehicles are completed in place (`--scene`).
+    pub scene: Option<SceneJob>,
+}
+
+/// How the vehicles of a street scan are found (`complete --scene`).
+#[derive(Debug, Clone)]
+pub struct SceneJob {
+    pub selection: Selection,
+    pub params: SceneParams,
+}
+
+/// What `complete --scene` reports of one scan besides [`FileReport`]'s totals.
+#[derive(Debug, Serialize)]
+pub struct SceneReport {
+    pub ground_points: usize,
+    /// Objects the size test looked at, vehicles or not.
+    pub objects: usize,
+    pub vehicles: Vec<VehicleReport>,
+    /// Objects that are no vehicle, by why.
+    pub rejected: BTreeMap<String, usize>,
 }
 
 /// What `complete --json` reports for one file.
@@ -126,11 +152,26 @@ pub struct FileReport {
     pub seconds: BTreeMap<String, f64>,
     #[serde(skip)]
     pub timings: Timings,
+    /// Each vehicle of a street scan (`--scene`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene: Option<SceneReport>,
 }
 
 impl FileReport {
     /// The line said for one completed file.
     pub fn summary(&self) -> String {
+        if let Some(scene) = &self.scene {
+            return format!(
+                "{}: {} points → {} ({} completed for {} of {} objects) in {:.2} s",
+                self.output.display(),
+                self.input_points,
+                self.output_points,
+                self.added,
+                count(scene.vehicles.len(), "vehicle"),
+                scene.objects,
+                self.seconds.values().sum::<f64>()
+            );
+        }
         format!(
             "{}: {} points → {} ({} completed{}{}) in {:.2} s",
             self.output.display(),
@@ -225,6 +266,10 @@ pub fn complete_file(
     let cloud = loaded.cloud;
     let read = start.elapsed();
     let settings = (job.settings)(input);
+    if let Some(scene) = &job.scene {
+        let dropped = loaded.non_finite_dropped;
+        return complete_scene_file(input, output, format, cloud, dropped, read, scene, job);
+    }
     let mut run = job
         .completer
         .run(&cloud, &settings)
@@ -280,7 +325,114 @@ pub fn complete_file(
             .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
             .collect(),
         timings,
+        scene: None,
     })
+}
+
+/// [`complete_file`] for a whole street scan (`--scene`): every vehicle found completed in
+/// place, the scan written back with the completed points appended.
+#[allow(clippy::too_many_arguments)]
+fn complete_scene_file(
+    input: &Path,
+    output: &Path,
+    format: Format,
+    cloud: PointCloud,
+    non_finite_dropped: usize,
+    read: std::time::Duration,
+    scene: &SceneJob,
+    job: &Job,
+) -> Result<FileReport, FileError> {
+    let settings = (job.settings)(input);
+    let fail = |source| FileError::Scene {
+        path: input.to_path_buf(),
+        source,
+    };
+    let start = Instant::now();
+    let objects =
+        find_objects(&cloud, settings.options.up, &scene.selection, &scene.params).map_err(fail)?;
+    let done = complete_scene(&cloud, &objects, job.completer, &settings).map_err(fail)?;
+    let mut warnings: Vec<String> = non_finite_warning(non_finite_dropped).into_iter().collect();
+    if let Selection::Classes(codes) = &scene.selection {
+        let classes = cloud.attribute(CLASSIFICATION).map(|a| &a.values);
+        for code in codes {
+            if !classes.is_some_and(|v| v.iter().any(|&c| c == f64::from(*code))) {
+                warnings.push(format!("--vehicle-class {code}: no point has this class"));
+            }
+        }
+    }
+    if done.vehicles.is_empty() {
+        warnings.push(format!(
+            "no vehicle found among {}; the scan is written unchanged",
+            count(objects.objects.len(), "object")
+        ));
+    }
+    for v in &done.vehicles {
+        match &v.failed {
+            Some(why) => warnings.push(format!("vehicle {} left as scanned: {why}", v.id)),
+            None => warnings.extend(v.warnings.iter().map(|w| format!("vehicle {}: {w}", v.id))),
+        }
+    }
+    warnings.extend(unwritten(&done.cloud, format, output));
+    let completing = start.elapsed();
+    let start = Instant::now();
+    write_cloud(output, &done.cloud, Some(format), job.files.encoding)?;
+    let timings = Timings {
+        read,
+        write: start.elapsed(),
+        ..Timings::default()
+    };
+    let mut rejected = BTreeMap::new();
+    for o in objects
+        .objects
+        .iter()
+        .filter(|o| o.verdict != Verdict::Vehicle)
+    {
+        let why = serde_json::to_value(o.verdict).map_or_else(
+            |_| String::new(),
+            |v| v.as_str().unwrap_or_default().to_string(),
+        );
+        *rejected.entry(why).or_insert(0) += 1;
+    }
+    let mut seconds: BTreeMap<String, f64> = timings
+        .stages()
+        .iter()
+        .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
+        .collect();
+    seconds.insert("vehicles".into(), completing.as_secs_f64());
+    Ok(FileReport {
+        input: input.to_path_buf(),
+        output: output.to_path_buf(),
+        method: settings.options.method,
+        input_points: cloud.len(),
+        output_points: done.cloud.len(),
+        added: done.vehicles.iter().map(|v| v.added).sum(),
+        mirrored: done.vehicles.iter().map(|v| v.mirrored).sum(),
+        filtered_out: 0,
+        network_passes: 0,
+        symmetry_plane: None,
+        orientation: OrientationReport {
+            heading: None,
+            method: "per vehicle",
+            refinement: None,
+            refined_by: None,
+            roll: 0.0,
+        },
+        cleaned: None,
+        warnings,
+        seconds,
+        timings,
+        scene: Some(SceneReport {
+            ground_points: objects.ground_points,
+            objects: objects.objects.len(),
+            vehicles: done.vehicles,
+            rejected,
+        }),
+    })
+}
+
+/// `n` and the noun, plural unless one.
+fn count(n: usize, noun: &str) -> String {
+    format!("{n} {noun}{}", if n == 1 { "" } else { "s" })
 }
 
 /// Refuses, before anything is read, an output or preview that would take the place of the

@@ -350,6 +350,16 @@ pub struct CompleteArgs {
         conflicts_with = "paper"
     )]
     pub vehicle_width: Option<f64>,
+    /// The input is a whole street scan in metres (an MLS tile): find its vehicles, complete
+    /// each one in its own frame, and write the scene back with every input point unchanged
+    /// and in its order, the completed points appended with the synthetic flag and a `vehicle`
+    /// number (docs/scenes.md).
+    #[arg(long, conflicts_with_all = ["paper", "save_views", "preview"])]
+    pub scene: bool,
+    /// With --scene: the vehicles are the points of these LAS classification codes (e.g. 10,64)
+    /// instead of what stands on the ground and has a vehicle's size.
+    #[arg(long, value_name = "CODES", value_delimiter = ',', requires = "scene")]
+    pub vehicle_class: Option<Vec<u8>>,
     /// A JSON file of the heuristics' tunables to change (`{"orient": {"flank_band": 0.004}}`;
     /// the names and today's values: `mvpcc complete --print-tuning`), for experiments.
     #[arg(long, value_name = "FILE", conflicts_with = "paper")]

@@ -6,11 +6,14 @@ use crate::cli::args::CompleteArgs;
 use crate::cli::count;
 use crate::cli::streams::{say, tell};
 use anyhow::bail;
-use mvpcc::app::complete::{complete_file, Batch, BatchEntry, FileOptions, FileReport, Job};
+use mvpcc::app::complete::{
+    complete_file, Batch, BatchEntry, FileOptions, FileReport, Job, SceneJob,
+};
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::{Completer, Method, Options, Settings, Source, Tuning};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::io::default_up;
+use mvpcc::scene::{SceneParams, Selection};
 use std::path::{Path, PathBuf};
 
 pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
@@ -47,6 +50,13 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
             preview: args.preview.clone(),
             report_on_stdout: args.json,
         },
+        scene: args.scene.then(|| SceneJob {
+            selection: match &args.vehicle_class {
+                Some(codes) => Selection::Classes(codes.clone()),
+                None => Selection::Detect,
+            },
+            params: SceneParams::default(),
+        }),
     };
     match (&args.input, &args.output, &args.input_dir, &args.output_dir) {
         (Some(input), Some(output), _, _) => {

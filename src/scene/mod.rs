@@ -1,0 +1,718 @@
+//! Whole street scans: the vehicles of an MLS tile found and each completed in its own frame by
+//! the normal pipeline ([`Completer::run`]), the completed points appended to the scene, whose
+//! own points stay as they were, in their order.
+//!
+//! Finding vehicles: where the input labels its points (`--vehicle-class`, LAS classification
+//! codes), the labelled points; otherwise the points above the ground ([`ground`]). Either way
+//! they are cut into objects by Euclidean clustering ([`cluster`]) and each object's footprint
+//! (length, width, height over the ground) is tested against the sizes of street vehicles
+//! ([`VehicleSizes`]). Coordinates are metres, as MLS tiles are: the sizes are the reason.
+
+pub mod cluster;
+pub mod ground;
+
+use crate::complete::{CompleteError, Completer, Settings};
+use crate::core::cloud::{Attribute, PointCloud, ScalarKind, SYNTHETIC};
+use crate::core::frame::UpAxis;
+use ground::{Ground, GroundParams};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The attribute that numbers the vehicle each completed point belongs to (1, 2, …); 0 on the
+/// scene's own points.
+pub const VEHICLE: &str = "vehicle";
+
+/// The LAS classification attribute, which `--vehicle-class` selects on.
+pub const CLASSIFICATION: &str = "classification";
+
+/// The size range of street vehicles, metres, in which a found object counts as one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VehicleSizes {
+    /// Along the footprint's long axis: from a motorcycle (1.5 m, less what one side shows) to
+    /// an articulated bus (18 m) and a little more.
+    pub length: [f64; 2],
+    /// Across it: from a motorcycle seen from one side to the widest road vehicle (2.6 m).
+    pub width: [f64; 2],
+    /// Over the ground: from a low sports car (1.1 m, less the scan's reach under it) to a
+    /// double-decker bus (4.4 m).
+    pub height: [f64; 2],
+}
+
+impl Default for VehicleSizes {
+    fn default() -> Self {
+        VehicleSizes {
+            length: [1.4, 20.0],
+            width: [0.5, 3.0],
+            height: [0.9, 4.6],
+        }
+    }
+}
+
+/// How objects are found and which count as vehicles.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SceneParams {
+    pub ground: GroundParams,
+    /// Points closer than this are one object, metres: below the gap between cars parked in a
+    /// row (half a metre or more), above the spacing of returns on a flank 10–20 m from an MLS
+    /// scanner.
+    pub gap: f64,
+    /// Objects of fewer points are not looked at: too few to tell or to complete.
+    pub min_points: usize,
+    /// Points higher than this over the ground join no object, metres: above the tallest
+    /// vehicle, so tree crowns and balconies do not join what stands under them.
+    pub max_height: f64,
+    /// Points the ground filter took that lie at least this far above the ground and inside a
+    /// vehicle's footprint are given back to it, metres: its tyres' lower parts, above the road's
+    /// range noise.
+    pub lift: f64,
+    pub sizes: VehicleSizes,
+}
+
+impl Default for SceneParams {
+    fn default() -> Self {
+        SceneParams {
+            ground: GroundParams::default(),
+            gap: 0.3,
+            min_points: 200,
+            max_height: 4.6,
+            lift: 0.06,
+            sizes: VehicleSizes::default(),
+        }
+    }
+}
+
+/// Which points may be vehicles.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Selection {
+    /// The points whose LAS classification is one of these codes.
+    Classes(Vec<u8>),
+    /// Every point above the ground.
+    Detect,
+}
+
+/// An object's footprint: a box about the vertical, in the input's coordinates and units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Footprint {
+    /// The middle of the box's bottom face (on the ground).
+    pub centre: [f64; 3],
+    pub length: f64,
+    pub width: f64,
+    /// From the ground to the object's highest point.
+    pub height: f64,
+    /// Direction of the long axis in the horizontal plane, degrees from the first horizontal
+    /// axis towards the second, in [0, 180).
+    pub axis_deg: f64,
+}
+
+/// What the size test made of an object.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    Vehicle,
+    TooShort,
+    TooLong,
+    TooNarrow,
+    TooWide,
+    TooLow,
+    TooTall,
+}
+
+/// A rough category from the footprint, for the report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Guess {
+    Motorcycle,
+    Car,
+    Van,
+    /// A truck, bus or tram: longer than 7 m.
+    Large,
+}
+
+/// One object of the scene.
+#[derive(Debug, Clone)]
+pub struct Object {
+    /// Its points, as indices into the scene.
+    pub indices: Vec<usize>,
+    pub footprint: Footprint,
+    pub verdict: Verdict,
+}
+
+impl Object {
+    pub fn guess(&self) -> Guess {
+        let f = &self.footprint;
+        if f.width < 1.2 && f.length < 2.8 {
+            Guess::Motorcycle
+        } else if f.length > 7.0 {
+            Guess::Large
+        } else if f.height > 2.1 || f.length > 5.4 {
+            Guess::Van
+        } else {
+            Guess::Car
+        }
+    }
+}
+
+/// The objects of a scene.
+#[derive(Debug, Clone)]
+pub struct Objects {
+    pub objects: Vec<Object>,
+    /// Points taken for ground (none when the input's classes said where vehicles are).
+    pub ground_points: usize,
+}
+
+impl Objects {
+    pub fn vehicles(&self) -> impl Iterator<Item = &Object> {
+        self.objects
+            .iter()
+            .filter(|o| o.verdict == Verdict::Vehicle)
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum SceneError {
+    #[error("the scene has a `{VEHICLE}` attribute already (a completed scene?); completing it again would overwrite it")]
+    AlreadyCompleted,
+    #[error("--vehicle-class needs a `{CLASSIFICATION}` attribute (LAS), which the scene has not")]
+    NoClassification,
+}
+
+/// A point as (horizontal position, height) relative to `origin`, for the up axis.
+fn split(p: [f64; 3], origin: [f64; 3], up: UpAxis) -> ([f64; 2], f64) {
+    let d = [0, 1, 2].map(|k| p[k] - origin[k]);
+    match up {
+        UpAxis::Z => ([d[0], d[1]], d[2]),
+        UpAxis::Y => ([d[0], d[2]], d[1]),
+    }
+}
+
+/// The inverse of [`split`].
+fn join(horizontal: [f64; 2], height: f64, origin: [f64; 3], up: UpAxis) -> [f64; 3] {
+    let local = match up {
+        UpAxis::Z => [horizontal[0], horizontal[1], height],
+        UpAxis::Y => [horizontal[0], height, horizontal[1]],
+    };
+    [0, 1, 2].map(|k| origin[k] + local[k])
+}
+
+/// Finds the objects of `cloud` that may be vehicles and tests each one's size.
+pub fn find_objects(
+    cloud: &PointCloud,
+    up: UpAxis,
+    selection: &Selection,
+    params: &SceneParams,
+) -> Result<Objects, SceneError> {
+    let origin = cloud.positions.first().copied().unwrap_or_default();
+    let split_all: Vec<([f64; 2], f64)> = cloud
+        .positions
+        .iter()
+        .map(|&p| split(p, origin, up))
+        .collect();
+    // A cloud no larger than the largest vehicle is one cut out already: one object, no ground.
+    if let Some(whole) = cut_out(&split_all, origin, up, params) {
+        return Ok(Objects {
+            objects: vec![whole],
+            ground_points: 0,
+        });
+    }
+    // The candidates, and the ground's height under each (None: each object's lowest point).
+    let (candidates, ground, ground_points) = match selection {
+        Selection::Classes(codes) => {
+            let classes = cloud
+                .attribute(CLASSIFICATION)
+                .ok_or(SceneError::NoClassification)?;
+            let picked: Vec<usize> = (0..cloud.len())
+                .filter(|&i| codes.contains(&(classes.values[i] as u8)))
+                .collect();
+            (picked, None, 0)
+        }
+        Selection::Detect => {
+            let ground = Ground::fit(&split_all, &params.ground);
+            let mut picked = Vec::new();
+            let mut on_ground = 0;
+            for (i, &(p, h)) in split_all.iter().enumerate() {
+                let above = h - ground.height_at(p);
+                if above <= params.ground.height {
+                    on_ground += 1;
+                } else if above <= params.max_height {
+                    picked.push(i);
+                }
+            }
+            (picked, Some(ground), on_ground)
+        }
+    };
+    let local: Vec<[f64; 3]> = candidates
+        .iter()
+        .map(|&i| {
+            let (p, h) = split_all[i];
+            [p[0], p[1], h]
+        })
+        .collect();
+    let mut objects: Vec<Object> = cluster::clusters(&local, params.gap, params.min_points)
+        .into_iter()
+        .map(|members| {
+            let indices: Vec<usize> = members.iter().map(|&k| candidates[k]).collect();
+            let footprint = footprint(&indices, &split_all, ground.as_ref(), origin, up);
+            let verdict = verdict(&footprint, &params.sizes);
+            Object {
+                indices,
+                footprint,
+                verdict,
+            }
+        })
+        .collect();
+    if let Some(ground) = &ground {
+        give_back_lowest(&mut objects, &split_all, ground, origin, up, params);
+    }
+    Ok(Objects {
+        objects,
+        ground_points,
+    })
+}
+
+/// The whole cloud as one vehicle when its footprint fits the largest one's: a cut-out vehicle
+/// given to `--scene` is completed as one (whatever its units, as the size test is not made).
+fn cut_out(
+    split_all: &[([f64; 2], f64)],
+    origin: [f64; 3],
+    up: UpAxis,
+    params: &SceneParams,
+) -> Option<Object> {
+    let all: Vec<usize> = (0..split_all.len()).collect();
+    let whole = footprint(&all, split_all, None, origin, up);
+    let sizes = &params.sizes;
+    let fits = whole.length <= sizes.length[1]
+        && whole.width <= sizes.width[1]
+        && whole.height <= sizes.height[1];
+    (fits && !all.is_empty()).then_some(Object {
+        indices: all,
+        footprint: whole,
+        verdict: Verdict::Vehicle,
+    })
+}
+
+/// Gives each vehicle the points the ground filter took from it: those inside its footprint
+/// (grown by the clustering gap) at least [`SceneParams::lift`] above the ground. Its points
+/// then run down to its tyres' contact instead of stopping at the ground threshold.
+fn give_back_lowest(
+    objects: &mut [Object],
+    split_all: &[([f64; 2], f64)],
+    ground: &Ground,
+    origin: [f64; 3],
+    up: UpAxis,
+    params: &SceneParams,
+) {
+    let low: Vec<usize> = (0..split_all.len())
+        .filter(|&i| {
+            let (p, h) = split_all[i];
+            let above = h - ground.height_at(p);
+            (params.lift..=params.ground.height).contains(&above)
+        })
+        .collect();
+    for object in objects.iter_mut().filter(|o| o.verdict == Verdict::Vehicle) {
+        let f = object.footprint;
+        let (centre, _) = split(f.centre, origin, up);
+        let angle = f.axis_deg.to_radians();
+        let (axis, across) = ([angle.cos(), angle.sin()], [-angle.sin(), angle.cos()]);
+        let inside = |p: [f64; 2]| {
+            let d = [p[0] - centre[0], p[1] - centre[1]];
+            let along = (d[0] * axis[0] + d[1] * axis[1]).abs();
+            let side = (d[0] * across[0] + d[1] * across[1]).abs();
+            along <= f.length / 2.0 + params.gap && side <= f.width / 2.0 + params.gap
+        };
+        object
+            .indices
+            .extend(low.iter().filter(|&&i| inside(split_all[i].0)));
+        object.indices.sort_unstable();
+    }
+}
+
+/// The box about the vertical that holds the points, its long axis the horizontal principal
+/// axis of their positions.
+fn footprint(
+    indices: &[usize],
+    split_all: &[([f64; 2], f64)],
+    ground: Option<&Ground>,
+    origin: [f64; 3],
+    up: UpAxis,
+) -> Footprint {
+    let n = indices.len() as f64;
+    let mean = indices.iter().fold([0.0; 2], |m, &i| {
+        let p = split_all[i].0;
+        [m[0] + p[0] / n, m[1] + p[1] / n]
+    });
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for &i in indices {
+        let p = split_all[i].0;
+        let (dx, dy) = (p[0] - mean[0], p[1] - mean[1]);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let (axis, across) = ([angle.cos(), angle.sin()], [-angle.sin(), angle.cos()]);
+    let mut range = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+    let (mut top, mut bottom) = (f64::NEG_INFINITY, f64::INFINITY);
+    let mut grounds = Vec::new();
+    for &i in indices {
+        let (p, h) = split_all[i];
+        for (k, dir) in [axis, across].iter().enumerate() {
+            let t = p[0] * dir[0] + p[1] * dir[1];
+            range[k] = [range[k][0].min(t), range[k][1].max(t)];
+        }
+        top = top.max(h);
+        bottom = bottom.min(h);
+        if let Some(g) = ground.map(|g| g.height_at(p)).filter(|g| g.is_finite()) {
+            grounds.push(g);
+        }
+    }
+    // The ground under the object: the median of the surface under its points (the object's
+    // lowest point where the surface is unknown or the input's classes found the object).
+    let base = if grounds.is_empty() {
+        bottom
+    } else {
+        grounds.sort_by(f64::total_cmp);
+        grounds[grounds.len() / 2].min(bottom)
+    };
+    let mid = [0, 1].map(|k| (range[k][0] + range[k][1]) / 2.0);
+    let centre = [0, 1].map(|c| mid[0] * axis[c] + mid[1] * across[c]);
+    Footprint {
+        centre: join(centre, base, origin, up),
+        length: range[0][1] - range[0][0],
+        width: range[1][1] - range[1][0],
+        height: top - base,
+        // rem_euclid of a tiny negative angle rounds to 180 itself.
+        axis_deg: Some(angle.to_degrees().rem_euclid(180.0)).map_or(0.0, |a| {
+            if a < 180.0 {
+                a
+            } else {
+                0.0
+            }
+        }),
+    }
+}
+
+fn verdict(f: &Footprint, sizes: &VehicleSizes) -> Verdict {
+    let checks = [
+        (f.length < sizes.length[0], Verdict::TooShort),
+        (f.length > sizes.length[1], Verdict::TooLong),
+        (f.width < sizes.width[0], Verdict::TooNarrow),
+        (f.width > sizes.width[1], Verdict::TooWide),
+        (f.height < sizes.height[0], Verdict::TooLow),
+        (f.height > sizes.height[1], Verdict::TooTall),
+    ];
+    checks
+        .into_iter()
+        .find_map(|(fails, v)| fails.then_some(v))
+        .unwrap_or(Verdict::Vehicle)
+}
+
+/// What became of one vehicle.
+#[derive(Debug, Clone, Serialize)]
+pub struct VehicleReport {
+    /// The value of [`VEHICLE`] on its completed points.
+    pub id: usize,
+    pub guess: Guess,
+    pub footprint: Footprint,
+    pub points: usize,
+    /// Completed points appended for it.
+    pub added: usize,
+    pub mirrored: usize,
+    /// The heading the pipeline found, degrees, in the vehicle's own normalized frame.
+    pub heading: Option<f64>,
+    /// Whether the symmetry plane's cues agreed (none: no plane).
+    pub plane_vouched: Option<bool>,
+    pub warnings: Vec<String>,
+    /// Why it was left as scanned, when its completion failed.
+    pub failed: Option<String>,
+}
+
+/// The completed scene and what became of each vehicle.
+#[derive(Debug, Clone)]
+pub struct SceneCompletion {
+    /// The scene's points as they were, in their order, then the completed points, with the
+    /// [`SYNTHETIC`] and [`VEHICLE`] attributes.
+    pub cloud: PointCloud,
+    pub vehicles: Vec<VehicleReport>,
+}
+
+/// Completes each vehicle of `objects` in `cloud` with `completer` (`settings` as for one
+/// cut-out vehicle) and appends what each one gains. A vehicle whose completion fails is left as
+/// scanned and reported so; the scene is never lost for it.
+pub fn complete_scene(
+    cloud: &PointCloud,
+    objects: &Objects,
+    completer: &Completer,
+    settings: &Settings,
+) -> Result<SceneCompletion, SceneError> {
+    if cloud.attribute(VEHICLE).is_some() {
+        return Err(SceneError::AlreadyCompleted);
+    }
+    let vehicles: Vec<&Object> = objects.vehicles().collect();
+    if vehicles.is_empty() {
+        // Unchanged to the attribute: no flag or vehicle number is added to a scene without one.
+        return Ok(SceneCompletion {
+            cloud: cloud.clone(),
+            vehicles: Vec::new(),
+        });
+    }
+    let runs: Vec<Result<crate::complete::Run, CompleteError>> = vehicles
+        .par_iter()
+        .map(|v| completer.run(&cloud.select(&v.indices), settings))
+        .collect();
+    let mut out = cloud.clone();
+    if out.attribute(SYNTHETIC).is_none() {
+        out.attributes
+            .push(zeros(SYNTHETIC, ScalarKind::U8, cloud.len()));
+    }
+    out.attributes
+        .push(zeros(VEHICLE, ScalarKind::U16, cloud.len()));
+    let mut reports = Vec::new();
+    for (k, (vehicle, run)) in vehicles.iter().zip(runs).enumerate() {
+        let id = k + 1;
+        let mut report = VehicleReport {
+            id,
+            guess: vehicle.guess(),
+            footprint: vehicle.footprint,
+            points: vehicle.indices.len(),
+            added: 0,
+            mirrored: 0,
+            heading: None,
+            plane_vouched: None,
+            warnings: Vec::new(),
+            failed: None,
+        };
+        match run {
+            Ok(run) => {
+                let done = run.completion;
+                let flags = &done
+                    .cloud
+                    .attribute(SYNTHETIC)
+                    .expect("a completion flags its points")
+                    .values;
+                let keep: Vec<bool> = flags.iter().map(|&f| f == 1.0).collect();
+                let added = done.cloud.filter(&keep);
+                report.added = added.len();
+                report.mirrored = done.mirrored;
+                report.heading = run.orientation.heading;
+                report.plane_vouched = done.plane.map(|p| p.vouched);
+                report.warnings = done.warnings;
+                append(&mut out, &added, id);
+            }
+            Err(e) => report.failed = Some(e.to_string()),
+        }
+        reports.push(report);
+    }
+    Ok(SceneCompletion {
+        cloud: out,
+        vehicles: reports,
+    })
+}
+
+fn zeros(name: &str, kind: ScalarKind, n: usize) -> Attribute {
+    Attribute {
+        name: name.to_string(),
+        kind,
+        values: vec![0.0; n],
+    }
+}
+
+/// Appends `added` (one vehicle's completed points) to `scene`: each of the scene's attributes
+/// takes the added points' values of the same name, zero where they have none, so that the
+/// scene keeps every attribute it had.
+fn append(scene: &mut PointCloud, added: &PointCloud, id: usize) {
+    let n = added.len();
+    scene.positions.extend(&added.positions);
+    if let Some(colors) = &mut scene.colors {
+        match &added.colors {
+            Some(more) => colors.extend(more),
+            None => colors.extend(std::iter::repeat_n([128, 128, 128], n)),
+        }
+    }
+    for a in &mut scene.attributes {
+        match (a.name.as_str(), added.attribute(&a.name)) {
+            (VEHICLE, _) => a.values.extend(std::iter::repeat_n(id as f64, n)),
+            (SYNTHETIC, _) => a.values.extend(std::iter::repeat_n(1.0, n)),
+            (_, Some(values)) => a.values.extend(&values.values),
+            (_, None) => a.values.extend(std::iter::repeat_n(0.0, n)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flat street with a box-shaped car (4.5 × 1.8 × 1.5 m, its flank and roof scanned), a
+    /// pole, a low wall and a long façade: the car alone passes the size test.
+    fn street() -> PointCloud {
+        let mut points = Vec::new();
+        for i in 0..400 {
+            for j in 0..100 {
+                points.push([i as f64 * 0.1, j as f64 * 0.1, 0.0]);
+            }
+        }
+        let car = |x: f64, y: f64| {
+            let mut p = Vec::new();
+            for i in 0..45 {
+                for k in 0..13 {
+                    p.push([x + i as f64 * 0.1, y, 0.2 + k as f64 * 0.1]);
+                }
+                for j in 0..18 {
+                    p.push([x + i as f64 * 0.1, y + j as f64 * 0.1, 1.5]);
+                }
+            }
+            p
+        };
+        points.extend(car(5.0, 3.0));
+        for k in 0..60 {
+            for (dx, dy) in [
+                (0.0, 0.0),
+                (0.05, 0.0),
+                (0.0, 0.05),
+                (0.05, 0.05),
+                (0.1, 0.1),
+            ] {
+                points.push([20.0 + dx, 3.0 + dy, 0.1 * k as f64]);
+            }
+        }
+        for i in 0..60 {
+            for k in 0..4 {
+                points.push([24.0 + i as f64 * 0.1, 5.0, 0.3 + k as f64 * 0.1]);
+            }
+        }
+        for i in 0..300 {
+            for k in 0..40 {
+                points.push([5.0 + i as f64 * 0.1, 9.9, 0.3 + k as f64 * 0.1]);
+            }
+        }
+        // In UTM, as MLS tiles are.
+        let offset = [652_000.0, 5_280_000.0, 120.0];
+        PointCloud::from_positions(
+            points
+                .into_iter()
+                .map(|p| [0, 1, 2].map(|k| p[k] + offset[k]))
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn on_a_street_the_car_alone_is_a_vehicle() {
+        let found = find_objects(
+            &street(),
+            UpAxis::Z,
+            &Selection::Detect,
+            &SceneParams::default(),
+        )
+        .unwrap();
+        let vehicles: Vec<&Object> = found.vehicles().collect();
+        assert_eq!(
+            vehicles.len(),
+            1,
+            "{:?}",
+            found
+                .objects
+                .iter()
+                .map(|o| (o.verdict, o.footprint))
+                .collect::<Vec<_>>()
+        );
+        let car = vehicles[0].footprint;
+        assert!((car.length - 4.4).abs() < 0.15, "{car:?}");
+        assert!((car.width - 1.7).abs() < 0.15, "{car:?}");
+        assert!((car.height - 1.5).abs() < 0.15, "{car:?}");
+        assert!(car.axis_deg < 2.0 || car.axis_deg > 178.0, "{car:?}");
+        assert_eq!(vehicles[0].guess(), Guess::Car);
+        let verdicts: Vec<Verdict> = found.objects.iter().map(|o| o.verdict).collect();
+        // The façade, the wall (0.6 m high, too narrow before too low) and the pole.
+        assert_eq!(
+            verdicts,
+            [
+                Verdict::TooLong,
+                Verdict::Vehicle,
+                Verdict::TooNarrow,
+                Verdict::TooShort
+            ]
+        );
+        assert!(found.ground_points >= 40_000);
+    }
+
+    #[test]
+    fn classes_select_the_vehicles_when_the_input_has_them() {
+        let mut cloud = street();
+        let classes: Vec<f64> = (0..cloud.len())
+            .map(|i| {
+                if (40_000..40_000 + 45 * 31).contains(&i) {
+                    10.0
+                } else {
+                    2.0
+                }
+            })
+            .collect();
+        cloud.attributes.push(Attribute {
+            name: CLASSIFICATION.into(),
+            kind: ScalarKind::U8,
+            values: classes,
+        });
+        let params = SceneParams::default();
+        let found =
+            find_objects(&cloud, UpAxis::Z, &Selection::Classes(vec![10]), &params).unwrap();
+        assert_eq!(found.vehicles().count(), 1);
+        assert_eq!(found.objects[0].indices.len(), 45 * 31);
+        let none = find_objects(&cloud, UpAxis::Z, &Selection::Classes(vec![64]), &params).unwrap();
+        assert_eq!(none.objects.len(), 0);
+        let unlabelled = find_objects(&street(), UpAxis::Z, &Selection::Classes(vec![10]), &params);
+        assert!(matches!(unlabelled, Err(SceneError::NoClassification)));
+    }
+
+    /// A vehicle whose completion fails (here: no model for the network) is listed with why,
+    /// and the scene comes back whole.
+    #[test]
+    fn a_vehicle_that_fails_is_left_as_scanned_and_the_scene_kept() {
+        let cloud = street();
+        let params = SceneParams::default();
+        let found = find_objects(&cloud, UpAxis::Z, &Selection::Detect, &params).unwrap();
+        let settings = Settings {
+            clean: false,
+            orient: crate::complete::orient::OrientMode::None,
+            options: crate::complete::Options {
+                up: UpAxis::Z,
+                ..Default::default()
+            },
+        };
+        let done = complete_scene(&cloud, &found, &Completer::new(None, None), &settings).unwrap();
+        assert_eq!(done.vehicles.len(), 1);
+        let failed = done.vehicles[0].failed.as_deref().unwrap();
+        assert!(failed.contains("model"), "{failed}");
+        assert_eq!(done.cloud.positions, cloud.positions);
+    }
+
+    #[test]
+    fn appended_points_keep_every_attribute_of_the_scene() {
+        let mut scene = PointCloud::from_positions(vec![[0.0; 3]; 3]);
+        scene.attributes.push(Attribute {
+            name: "intensity".into(),
+            kind: ScalarKind::U16,
+            values: vec![7.0; 3],
+        });
+        scene.attributes.push(zeros(SYNTHETIC, ScalarKind::U8, 3));
+        scene.attributes.push(zeros(VEHICLE, ScalarKind::U16, 3));
+        let added = PointCloud::from_positions(vec![[1.0; 3]; 2]);
+        append(&mut scene, &added, 4);
+        assert_eq!(scene.len(), 5);
+        assert!(scene.is_consistent());
+        assert_eq!(
+            scene.attribute("intensity").unwrap().values,
+            [7.0, 7.0, 7.0, 0.0, 0.0]
+        );
+        assert_eq!(
+            scene.attribute(SYNTHETIC).unwrap().values,
+            [0.0, 0.0, 0.0, 1.0, 1.0]
+        );
+        assert_eq!(
+            scene.attribute(VEHICLE).unwrap().values,
+            [0.0, 0.0, 0.0, 4.0, 4.0]
+        );
+    }
+}

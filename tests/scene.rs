@@ -1,0 +1,263 @@
+//! `mvpcc complete --scene` end to end on a small street in UTM coordinates (LAS, z up): two
+//! scanned cars, a pole and the road; every input point comes back unchanged and in its order,
+//! each car gains completed points numbered with its vehicle.
+
+use assert_cmd::Command;
+use mvpcc::core::cloud::{Attribute, PointCloud, ScalarKind, SYNTHETIC};
+use mvpcc::datagen::shapes;
+use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use predicates::prelude::*;
+use std::path::{Path, PathBuf};
+use tempfile::TempDir;
+
+const OFFSET: [f64; 3] = [651_234.5, 5_234_567.25, 103.25];
+const CLASS_GROUND: f64 = 2.0;
+const CLASS_POLE: f64 = 5.0;
+const CLASS_CAR: f64 = 10.0;
+
+fn mvpcc() -> Command {
+    Command::cargo_bin("mvpcc").unwrap()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A 40 × 12 m road (a point every 10 cm), a scanned car at x = 10 m and another, turned the
+/// other way, at x = 25 m, and a pole at x = 33 m; z up, offset into UTM, classified.
+fn street(with_cars: bool) -> PointCloud {
+    let mut positions = Vec::new();
+    let mut classes = Vec::new();
+    for i in 0..400 {
+        for j in 0..120 {
+            positions.push([i as f64 * 0.1, j as f64 * 0.1, 0.0]);
+            classes.push(CLASS_GROUND);
+        }
+    }
+    if with_cars {
+        for (seed, x, y, turn) in [(3, 10.0, 4.0, 1.0), (4, 25.0, 8.0, -1.0)] {
+            // The generator's cars are y up, their length along z: length along x here.
+            let car = shapes::scanned_side(&shapes::car(8000, seed)).positions;
+            for p in car {
+                positions.push([x + turn * p[2], y + turn * p[0], p[1]]);
+                classes.push(CLASS_CAR);
+            }
+        }
+    }
+    for k in 0..100 {
+        for (dx, dy) in [(0.0, 0.0), (0.05, 0.0), (0.0, 0.05), (0.05, 0.05)] {
+            positions.push([33.0 + dx, 3.0 + dy, k as f64 * 0.05]);
+            classes.push(CLASS_POLE);
+        }
+    }
+    let mut cloud = PointCloud::from_positions(
+        positions
+            .into_iter()
+            .map(|p| [0, 1, 2].map(|k| p[k] + OFFSET[k]))
+            .collect(),
+    );
+    let n = cloud.len();
+    cloud.attributes.push(Attribute {
+        name: "classification".into(),
+        kind: ScalarKind::U8,
+        values: classes,
+    });
+    cloud.attributes.push(Attribute {
+        name: "intensity".into(),
+        kind: ScalarKind::U16,
+        values: (0..n).map(|i| (i % 4000) as f64).collect(),
+    });
+    cloud
+}
+
+fn write(dir: &TempDir, name: &str, cloud: &PointCloud) -> PathBuf {
+    let path = dir.path().join(name);
+    write_cloud(&path, cloud, None, Encoding::Binary).unwrap();
+    path
+}
+
+fn read(path: &Path) -> PointCloud {
+    read_cloud(path, None).unwrap().cloud
+}
+
+/// The input's points and attributes are the output's first, to the bit and in order.
+fn unchanged_then_appended(input: &PointCloud, output: &PointCloud) {
+    let n = input.len();
+    assert_eq!(output.positions[..n], input.positions[..]);
+    for a in &input.attributes {
+        let out = output.attribute(&a.name).unwrap();
+        assert_eq!(out.values[..n], a.values[..], "{}", a.name);
+    }
+    assert_eq!(output.quantization, input.quantization);
+}
+
+fn report(output: &std::process::Output) -> serde_json::Value {
+    serde_json::from_slice(&output.stdout).unwrap()
+}
+
+#[test]
+fn a_street_comes_back_unchanged_with_each_cars_completion_appended() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "street.las", &street(true));
+    let output = dir.path().join("done.las");
+    let run = mvpcc()
+        .args(["complete", "--scene", s(&input), s(&output), "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stderr.contains("completed for 2 vehicles of 3 objects"),
+        "{stderr}"
+    );
+    let (scanned, done) = (read(&input), read(&output));
+    unchanged_then_appended(&scanned, &done);
+    let n = scanned.len();
+    assert!(done.len() > n + 1000, "{} after {n}", done.len());
+    let flags = &done.attribute(SYNTHETIC).unwrap().values;
+    let vehicles = &done.attribute("vehicle").unwrap().values;
+    assert!(flags[..n].iter().all(|&f| f == 0.0) && vehicles[..n].iter().all(|&v| v == 0.0));
+    assert!(flags[n..].iter().all(|&f| f == 1.0));
+    let mut ids: Vec<f64> = vehicles[n..].to_vec();
+    ids.dedup();
+    assert_eq!(ids, [1.0, 2.0], "each car's points together, in its number");
+    // Each car's completed points lie about it: within its 4.5 × 2 m footprint, which they
+    // widen to the far flank the scan did not see.
+    let json = report(&run);
+    for car in json["scene"]["vehicles"].as_array().unwrap() {
+        let id = car["id"].as_f64().unwrap();
+        let centre: Vec<f64> = (0..3)
+            .map(|k| car["footprint"]["centre"][k].as_f64().unwrap() - OFFSET[k])
+            .collect();
+        let nearest = [(10.0, 4.0), (25.0, 8.0)]
+            .into_iter()
+            .find(|(x, y)| (centre[0] - x).abs() < 1.0 && (centre[1] - y).abs() < 1.5);
+        let (x, y) = nearest.unwrap_or_else(|| panic!("{car}"));
+        let added: Vec<[f64; 3]> = (n..done.len())
+            .filter(|&i| vehicles[i] == id)
+            .map(|i| [0, 1, 2].map(|k| done.positions[i][k] - OFFSET[k]))
+            .collect();
+        let far = added.iter().fold([0.0f64; 2], |m, p| {
+            [m[0].max((p[0] - x).abs()), m[1].max((p[1] - y).abs())]
+        });
+        assert!(far[0] < 2.6 && far[1] < 1.3, "{id}: {far:?}");
+        assert!(far[1] > 0.6, "{id}: the far flank is drawn: {far:?}");
+    }
+    let scene = &json["scene"];
+    assert_eq!(scene["vehicles"].as_array().unwrap().len(), 2);
+    assert_eq!(scene["rejected"]["too_short"], 1, "the pole: {scene}");
+    let car = &scene["vehicles"][0];
+    assert_eq!(car["guess"], "car");
+    let length = car["footprint"]["length"].as_f64().unwrap();
+    assert!((3.5..5.0).contains(&length), "{car}");
+}
+
+#[test]
+fn classes_name_the_vehicles_and_a_class_the_file_lacks_is_said() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "street.las", &street(true));
+    let output = dir.path().join("done.las");
+    let run = mvpcc()
+        .args(["complete", "--scene", "--vehicle-class", "10,64", "--json"])
+        .args([s(&input), s(&output)])
+        .output()
+        .unwrap();
+    assert!(run.status.success());
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        stderr.contains("street.las: --vehicle-class 64: no point has this class"),
+        "{stderr}"
+    );
+    let json = report(&run);
+    let cars = json["scene"]["vehicles"].as_array().unwrap();
+    assert_eq!(cars.len(), 2);
+    // The labelled cars alone: none of the road, nothing rejected.
+    assert_eq!(json["scene"]["objects"], 2);
+    let scanned = read(&input);
+    let car_points = scanned
+        .attribute("classification")
+        .unwrap()
+        .values
+        .iter()
+        .filter(|&&c| c == CLASS_CAR)
+        .count();
+    let counted: u64 = cars.iter().map(|c| c["points"].as_u64().unwrap()).sum();
+    assert_eq!(counted as usize, car_points);
+    unchanged_then_appended(&scanned, &read(&output));
+}
+
+#[test]
+fn a_street_without_vehicles_comes_back_unchanged_and_says_so() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "empty.las", &street(false));
+    let output = dir.path().join("done.las");
+    mvpcc()
+        .args(["complete", "--scene", s(&input), s(&output)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "empty.las: no vehicle found among 1 object; the scan is written unchanged",
+        ));
+    let (scanned, done) = (read(&input), read(&output));
+    assert_eq!(done, scanned);
+}
+
+#[test]
+fn a_cut_out_vehicle_given_as_a_scene_is_completed_as_one() {
+    let dir = TempDir::new().unwrap();
+    let mut car = shapes::scanned_side(&shapes::car(8000, 5));
+    for p in &mut car.positions {
+        *p = [p[0] + OFFSET[0], p[1] + OFFSET[2], p[2] + OFFSET[1]];
+    }
+    let input = write(&dir, "car.ply", &car);
+    let (alone, in_scene) = (dir.path().join("alone.ply"), dir.path().join("scene.ply"));
+    mvpcc()
+        .args(["complete", s(&input), s(&alone)])
+        .assert()
+        .success();
+    mvpcc()
+        .args(["complete", "--scene", s(&input), s(&in_scene)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("for 1 vehicle of 1 objects"));
+    let (alone, in_scene) = (read(&alone), read(&in_scene));
+    assert_eq!(alone.positions, in_scene.positions);
+    assert_eq!(
+        in_scene.attribute("vehicle").unwrap().values[car.len()..],
+        vec![1.0; alone.len() - car.len()][..]
+    );
+}
+
+#[test]
+fn a_completed_scene_is_not_completed_again() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "street.las", &street(true));
+    let once = dir.path().join("once.las");
+    mvpcc()
+        .args([
+            "complete",
+            "--scene",
+            "--method",
+            "mirror",
+            s(&input),
+            s(&once),
+        ])
+        .assert()
+        .success();
+    let twice = dir.path().join("twice.las");
+    mvpcc()
+        .args(["complete", "--scene", s(&once), s(&twice)])
+        .assert()
+        .failure()
+        .stderr(
+            predicate::str::is_match(
+                r"(?m)^error: .*once\.las: the scene has a `vehicle` attribute already",
+            )
+            .unwrap(),
+        );
+    assert!(!twice.exists());
+}

@@ -392,6 +392,118 @@ fn profile_scan(mesh: &Mesh, spec: &PartialSpec, rng: &mut Lcg) -> Surface {
     out
 }
 
+/// A mobile scanner driving a straight street: a profile scanner on a path along +z at `x`,
+/// `height` above y = 0, each scan line a vertical sweep across the path to both sides.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StreetScanner {
+    pub x: f32,
+    pub height: f32,
+    /// Distance between scan lines along the path.
+    pub line_spacing: f32,
+    /// Angle between two returns of one scan line.
+    pub angle_step_deg: f32,
+    /// Standard deviation of the range noise.
+    pub noise: f32,
+}
+
+/// What a street scan returns: each point, its colour and the triangle it hit.
+#[derive(Debug, Clone, Default)]
+pub struct StreetScan {
+    pub points: Vec<[f32; 3]>,
+    pub colors: Vec<[u8; 3]>,
+    pub triangles: Vec<usize>,
+}
+
+/// Scans `mesh` (y up) with `scanner`: each side of the path is swept as [`profile_scan`]
+/// sweeps one side of an object, so the nearest surface along each ray occludes the rest.
+pub fn scan_street(mesh: &Mesh, scanner: &StreetScanner, rng: &mut Lcg) -> StreetScan {
+    let mut out = StreetScan::default();
+    for side in [1.0f32, -1.0] {
+        let kept: Vec<usize> = (0..mesh.triangles.len())
+            .filter(|&t| {
+                let centroid: f32 = mesh.triangles[t]
+                    .iter()
+                    .map(|&v| mesh.positions[v as usize][0])
+                    .sum::<f32>()
+                    / 3.0;
+                (centroid - scanner.x) * side > 0.0
+            })
+            .collect();
+        if kept.is_empty() {
+            continue;
+        }
+        let part = subset(mesh, &kept);
+        let path = ScanPath {
+            origin: [scanner.x, scanner.height, 0.0],
+            along: [0.0, 0.0, 1.0],
+            out: [side, 0.0, 0.0],
+        };
+        let coords: Vec<(f32, f32)> = part
+            .positions
+            .iter()
+            .map(|&p| path.coordinates(p))
+            .collect();
+        let rays = RayGrid::spanning(
+            &coords,
+            &path,
+            scanner.line_spacing,
+            scanner.angle_step_deg.to_radians(),
+        );
+        let hits = rays.first_hits(&part, &coords, &path);
+        for j in 0..rays.lines {
+            for (i, dir) in rays.dirs.iter().enumerate() {
+                let Some(hit) = hits[j * rays.angles + i] else {
+                    continue;
+                };
+                let range = hit.t + scanner.noise * rng.gauss() as f32;
+                let origin = rays.origin(&path, j);
+                let [b1, b2] = hit.bary;
+                out.points
+                    .push([0, 1, 2].map(|k| origin[k] + range * dir[k]));
+                out.colors
+                    .push(part.color_at(hit.triangle, [1.0 - b1 - b2, b1, b2]));
+                out.triangles.push(kept[hit.triangle]);
+            }
+        }
+    }
+    out
+}
+
+/// The triangles `kept` of `mesh` with the vertices they use, their materials and colours.
+fn subset(mesh: &Mesh, kept: &[usize]) -> Mesh {
+    let mut index = vec![u32::MAX; mesh.positions.len()];
+    let mut part = Mesh {
+        materials: mesh.materials.clone(),
+        ..Mesh::default()
+    };
+    for &t in kept {
+        let tri = mesh.triangles[t].map(|v| {
+            let v = v as usize;
+            if index[v] == u32::MAX {
+                index[v] = part.positions.len() as u32;
+                part.positions.push(mesh.positions[v]);
+            }
+            index[v]
+        });
+        part.triangles.push(tri);
+        part.material_of.push(mesh.material_of[t]);
+    }
+    part.corner_uv = mesh
+        .corner_uv
+        .as_ref()
+        .map(|uv| kept.iter().map(|&t| uv[t]).collect());
+    part.vertex_colors = mesh.vertex_colors.as_ref().map(|colors| {
+        let mut out = vec![[1.0; 3]; part.positions.len()];
+        for (v, &at) in index.iter().enumerate() {
+            if at != u32::MAX {
+                out[at as usize] = colors[v];
+            }
+        }
+        out
+    });
+    part
+}
+
 /// The scanner's rays over the mesh's extent: `lines` scan lines along the path (`u`), each
 /// with one ray per elevation step (`t`), centred in their cells.
 struct RayGrid {

@@ -1,8 +1,10 @@
 //! Euclidean clustering of the points above the ground: points closer than a gap belong to one
-//! object. Written over a voxel grid of the gap's side, whose occupied voxels are joined to
-//! their 26 neighbours by union-find: linear in the points, where a k-d tree's radius search
-//! per point is not, and close enough at MLS densities: objects closer than one gap always join,
-//! objects further than 2·√3 gaps (the farthest two points of neighbouring voxels) never do.
+//! object. Written over a voxel grid of the gap's side: the points of one voxel join, and two
+//! neighbouring voxels (of the 26) join when any of their points lie within the gap of each
+//! other, by union-find. Neighbouring voxels of one surface join at their first pair of points
+//! checked; only voxels of two objects near each other are compared pair by pair. Two objects
+//! closer than the gap always join; two further apart join only through a voxel they share
+//! (at most √3 gaps across).
 
 use std::collections::HashMap;
 
@@ -24,11 +26,23 @@ pub fn clusters(points: &[[f64; 3]], gap: f64, min_points: usize) -> Vec<Vec<usi
         }
         v
     }
+    let mut inside: Vec<Vec<usize>> = vec![Vec::new(); voxels.len()];
+    for (i, &v) in voxel_of.iter().enumerate() {
+        inside[v].push(i);
+    }
+    let near = |a: &[usize], b: &[usize]| {
+        a.iter().any(|&i| {
+            b.iter().any(|&j| {
+                let d = [0, 1, 2].map(|k| points[i][k] - points[j][k]);
+                d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= gap * gap
+            })
+        })
+    };
     for (k, &v) in &voxels {
         for d in neighbours() {
             if let Some(&w) = voxels.get(&[k[0] + d[0], k[1] + d[1], k[2] + d[2]]) {
                 let (a, b) = (root(&mut parent, v), root(&mut parent, w));
-                if a != b {
+                if a != b && near(&inside[v], &inside[w]) {
                     parent[a.max(b)] = a.min(b);
                 }
             }
@@ -81,6 +95,22 @@ mod tests {
         assert_eq!(found.len(), 2);
         assert_eq!(found[0], (0..400).collect::<Vec<_>>());
         assert_eq!(found[1], (400..700).collect::<Vec<_>>());
+    }
+
+    /// Two walls 0.5 m apart (more than the gap, less than two voxels) stay apart.
+    #[test]
+    fn objects_in_neighbouring_voxels_join_only_when_closer_than_the_gap() {
+        let wall = |x: f64| -> Vec<[f64; 3]> {
+            (0..400)
+                .map(|i| [x, (i % 20) as f64 * 0.1, (i / 20) as f64 * 0.1])
+                .collect()
+        };
+        let mut points = wall(0.05);
+        points.extend(wall(0.55));
+        assert_eq!(clusters(&points, 0.3, 1).len(), 2);
+        let mut touching = wall(0.05);
+        touching.extend(wall(0.3));
+        assert_eq!(clusters(&touching, 0.3, 1).len(), 1);
     }
 
     #[test]

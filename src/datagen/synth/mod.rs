@@ -3,6 +3,7 @@
 //! without riders. Deterministic per seed; written as OBJ + MTL for `mvpcc prepare`.
 
 mod builder;
+pub mod street;
 mod vehicles;
 
 use crate::core::camera::Camera;

@@ -144,7 +144,8 @@ fn a_street_comes_back_unchanged_with_each_cars_completion_appended() {
         let far = added.iter().fold([0.0f64; 2], |m, p| {
             [m[0].max((p[0] - x).abs()), m[1].max((p[1] - y).abs())]
         });
-        assert!(far[0] < 2.6 && far[1] < 1.3, "{id}: {far:?}");
+        // Half the car (2.2 m by 0.9) and at most 0.6 m beyond: no point strays to another object.
+        assert!(far[0] < 2.8 && far[1] < 1.5, "{id}: {far:?}");
         assert!(far[1] > 0.6, "{id}: the far flank is drawn: {far:?}");
     }
     let scene = &json["scene"];

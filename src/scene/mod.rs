@@ -80,8 +80,9 @@ pub struct SceneParams {
     /// vehicle, so tree crowns and balconies do not join what stands under them.
     pub max_height: f64,
     /// Points the ground filter took that lie at least this far above the ground and inside a
-    /// vehicle's footprint are given back to it, metres: its tyres' lower parts, above the road's
-    /// range noise.
+    /// vehicle's footprint are given back to it, metres: its tyres' lower parts, above twice an
+    /// MLS scanner's range noise (a real car completes in a street closer to how it does alone
+    /// with them: lab/2026-12-07-scene-detection).
     pub lift: f64,
     pub sizes: VehicleSizes,
 }
@@ -93,7 +94,7 @@ impl Default for SceneParams {
             gap: 0.3,
             min_points: 200,
             max_height: 4.6,
-            lift: 0.06,
+            lift: 0.02,
             sizes: VehicleSizes::default(),
         }
     }
@@ -338,8 +339,8 @@ fn cut_out(
     })
 }
 
-/// Gives each vehicle the points the ground filter took from it: those inside its footprint
-/// (grown by the clustering gap) at least [`SceneParams::lift`] above the ground. Its points
+/// Gives each vehicle the points the ground filter took from it: those inside its footprint at
+/// least [`SceneParams::lift`] above the ground. Its points
 /// then run down to its tyres' contact instead of stopping at the ground threshold.
 fn give_back_lowest(
     objects: &mut [Object],
@@ -365,7 +366,7 @@ fn give_back_lowest(
             let d = [p[0] - centre[0], p[1] - centre[1]];
             let along = (d[0] * axis[0] + d[1] * axis[1]).abs();
             let side = (d[0] * across[0] + d[1] * across[1]).abs();
-            along <= f.length / 2.0 + params.gap && side <= f.width / 2.0 + params.gap
+            along <= f.length / 2.0 && side <= f.width / 2.0
         };
         object
             .indices

@@ -263,3 +263,54 @@ fn a_completed_scene_is_not_completed_again() {
         );
     assert!(!twice.exists());
 }
+
+/// `synth --scene` writes a classified street with each point's object and the objects' truth,
+/// which `complete --scene --vehicle-class 64` completes vehicle by vehicle.
+#[test]
+fn a_generated_street_carries_its_truth_and_completes() {
+    let dir = TempDir::new().unwrap();
+    let out = dir.path().join("streets");
+    mvpcc()
+        .args([
+            "synth", "--scene", "--count", "1", "--length", "30", "--seed", "3",
+        ])
+        .args(["--out", s(&out)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("wrote 1 streets of 30 m"));
+    let las = out.join("street_00000.las");
+    let street = read(&las);
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("street_00000.json")).unwrap()).unwrap();
+    let objects = truth["objects"].as_array().unwrap();
+    let ids = &street.attribute("object").unwrap().values;
+    let classes = &street.attribute("classification").unwrap().values;
+    for (id, class) in ids.iter().zip(classes) {
+        let kind = objects[*id as usize]["kind"].as_str().unwrap();
+        assert_eq!(kind == "vehicle", *class == 64.0, "{kind} {class}");
+    }
+    let vehicles = objects.iter().filter(|o| o["kind"] == "vehicle").count();
+    let done = dir.path().join("done.las");
+    let run = mvpcc()
+        .args([
+            "complete",
+            "--scene",
+            "--vehicle-class",
+            "64",
+            "--method",
+            "mirror",
+            "--json",
+        ])
+        .args([s(&las), s(&done)])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let found = report(&run)["scene"]["vehicles"].as_array().unwrap().len();
+    // A vehicle the scan sees in two pieces (occluded in its middle) counts twice.
+    assert!(found >= vehicles / 2, "{found} of {vehicles}");
+    unchanged_then_appended(&street, &read(&done));
+}

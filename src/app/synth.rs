@@ -2,9 +2,11 @@
 //! under `OUT/<category>/`, their manifest `synth.json`, and a contact sheet.
 
 use super::{create_dir, write_json, PathError, Progress};
+use crate::core::rng::derive_seed;
 use crate::datagen::mesh::{write_obj, Mesh};
+use crate::datagen::synth::street::{street, Kind, StreetParams, TruthObject};
 use crate::datagen::synth::{contact_sheet, synthesize, Category, Draw, MAX_OBJECTS};
-use crate::io::atomic_write;
+use crate::io::{atomic_write, write_cloud, Encoding};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -24,6 +26,72 @@ pub enum SynthError {
     CategoryTwice(&'static str),
     #[error("{}: exists and is not a directory", .0.display())]
     NotADirectory(PathBuf),
+    #[error(transparent)]
+    Cloud(#[from] crate::io::CloudIoError),
+    #[error("--length must lie in 10..=1000 metres, got {0}")]
+    Length(f32),
+}
+
+/// The truth beside each generated street (`street_NNNNN.json`).
+#[derive(Debug, Serialize)]
+pub struct StreetTruth {
+    pub mvpcc_version: String,
+    pub seed: u64,
+    pub params: StreetParams,
+    /// The LAS classification codes its points carry, by kind of object.
+    pub classes: Vec<(Kind, u8)>,
+    /// Each object, its id the value of the `object` attribute on its points.
+    pub objects: Vec<TruthObject>,
+}
+
+/// `synth --scene`: `count` generated streets (`street_NNNNN.las`, z up, UTM-sized coordinates,
+/// classified, each point's object in the `object` attribute) with their truth beside them
+/// (`street_NNNNN.json`). Street `k` of a run with `seed` depends on these two alone.
+pub fn generate_streets(
+    out: &Path,
+    count: usize,
+    seed: u64,
+    params: &StreetParams,
+    progress: &dyn Progress,
+) -> Result<Vec<PathBuf>, SynthError> {
+    if out.exists() && !out.is_dir() {
+        return Err(SynthError::NotADirectory(out.to_path_buf()));
+    }
+    if !(10.0..=1000.0).contains(&params.length) {
+        return Err(SynthError::Length(params.length));
+    }
+    create_dir(out)?;
+    progress.start(count, "streets");
+    let written = (0..count)
+        .into_par_iter()
+        .map(|k| {
+            let street_seed = derive_seed(seed, &format!("street/{k}"));
+            let scene = street(street_seed, params);
+            let path = out.join(format!("street_{k:05}.las"));
+            write_cloud(&path, &scene.cloud, None, Encoding::Binary)?;
+            let kinds = [
+                Kind::Ground,
+                Kind::Building,
+                Kind::Pole,
+                Kind::Bin,
+                Kind::Bush,
+                Kind::Hedge,
+                Kind::Vehicle,
+            ];
+            let truth = StreetTruth {
+                mvpcc_version: env!("CARGO_PKG_VERSION").to_string(),
+                seed: street_seed,
+                params: *params,
+                classes: kinds.iter().map(|&k| (k, k.class())).collect(),
+                objects: scene.objects,
+            };
+            write_json(&path.with_extension("json"), &truth)?;
+            progress.done(&path.display().to_string());
+            Ok(path)
+        })
+        .collect::<Result<Vec<_>, SynthError>>()?;
+    progress.finish();
+    Ok(written)
 }
 
 /// `synth.json`: how a mesh directory was generated.

@@ -13,6 +13,7 @@ use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::data::CloudPolicy;
 use mvpcc::datagen::mesh::{Forward, SignedAxis};
 use mvpcc::datagen::scan::{PartialKinds, PartialParams};
+use mvpcc::datagen::synth::street::StreetParams;
 use mvpcc::datagen::synth::Draw;
 use mvpcc::io::batch::{default_jobs, Shard, MAX_JOBS};
 use mvpcc::io::{Encoding, Format};
@@ -634,12 +635,20 @@ pub struct PrepareArgs {
 
 #[derive(Debug, Args)]
 pub struct SynthArgs {
-    /// Number of objects.
+    /// Number of objects (with --scene: of streets).
     #[arg(long)]
     pub count: usize,
     /// Output directory; objects go to OUT/CATEGORY/CATEGORY_NNNNN.obj.
     #[arg(long)]
     pub out: PathBuf,
+    /// Whole scanned streets instead of objects, for `complete --scene`: OUT/street_NNNNN.las
+    /// (z up, in UTM-sized metres, classified; each point's object in the `object` attribute;
+    /// vehicles are class 64) and the objects' truth in OUT/street_NNNNN.json (docs/scenes.md).
+    #[arg(long, conflicts_with = "preview")]
+    pub scene: bool,
+    /// With --scene: each street's length in metres.
+    #[arg(long, requires = "scene", default_value_t = StreetParams::default().length)]
+    pub length: f32,
     #[command(flatten)]
     pub synth_options: SynthOptions,
     /// Also write OUT/preview.png: the first 16 objects rendered from one camera.

@@ -2,12 +2,30 @@
 
 use super::{Bar, Log};
 use crate::cli::args::SynthArgs;
-use mvpcc::app::synth::{check_count, generate, Generated};
+use mvpcc::app::synth::{check_count, generate, generate_streets, Generated};
+use mvpcc::datagen::synth::street::StreetParams;
 use std::path::Path;
 
 pub(super) fn run(args: SynthArgs, log: Log) -> anyhow::Result<()> {
     check_count(args.count, "--count")?;
     let options = &args.synth_options;
+    if args.scene {
+        let params = StreetParams {
+            length: args.length,
+            ..StreetParams::default()
+        };
+        let start = std::time::Instant::now();
+        let written =
+            generate_streets(&args.out, args.count, options.seed, &params, &Bar::new(log))?;
+        log.info(format!(
+            "wrote {} streets of {} m to {} in {:.1} s",
+            written.len(),
+            params.length,
+            args.out.display(),
+            start.elapsed().as_secs_f64()
+        ));
+        return Ok(());
+    }
     let draws = &options.category;
     let done = generate(
         &args.out,

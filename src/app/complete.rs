@@ -15,6 +15,7 @@ use crate::io::{
     atomic_write, check_output, non_finite_warning, read_cloud, same_file, unwritten, write_cloud,
     CloudIoError, Encoding, Format, Problem,
 };
+use crate::scene::preview::plan_view;
 use crate::scene::{
     complete_scene, find_objects, SceneError, SceneParams, Selection, VehicleReport, Verdict,
     CLASSIFICATION,
@@ -376,6 +377,17 @@ fn complete_scene_file(
     let completing = start.elapsed();
     let start = Instant::now();
     write_cloud(output, &done.cloud, Some(format), job.files.encoding)?;
+    if let Some(path) = &job.files.preview {
+        let image = plan_view(&done.cloud, cloud.len(), settings.options.up);
+        let format = preview_format(path)?;
+        atomic_write(path, |w| {
+            image.write_to(w, format).map_err(std::io::Error::other)
+        })
+        .map_err(|source| FileError::Preview {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    }
     let timings = Timings {
         read,
         write: start.elapsed(),

@@ -355,7 +355,7 @@ pub struct CompleteArgs {
     /// each one in its own frame, and write the scene back with every input point unchanged
     /// and in its order, the completed points appended with the synthetic flag and a `vehicle`
     /// number (docs/scenes.md).
-    #[arg(long, conflicts_with_all = ["paper", "save_views", "preview"])]
+    #[arg(long, conflicts_with_all = ["paper", "save_views"])]
     pub scene: bool,
     /// With --scene: the vehicles are the points of these LAS classification codes (e.g. 10,64)
     /// instead of what stands on the ground and has a vehicle's size.

@@ -10,6 +10,7 @@
 
 pub mod cluster;
 pub mod ground;
+pub mod preview;
 pub mod score;
 
 use crate::complete::{CompleteError, Completer, Settings};

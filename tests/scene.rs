@@ -125,8 +125,7 @@ fn a_street_comes_back_unchanged_with_each_cars_completion_appended() {
     let mut ids: Vec<f64> = vehicles[n..].to_vec();
     ids.dedup();
     assert_eq!(ids, [1.0, 2.0], "each car's points together, in its number");
-    // Each car's completed points lie about it: within its 4.5 × 2 m footprint, which they
-    // widen to the far flank the scan did not see.
+    // Each car's completed points lie about it, out to the far flank the scan did not see.
     let json = report(&run);
     for car in json["scene"]["vehicles"].as_array().unwrap() {
         let id = car["id"].as_f64().unwrap();

@@ -222,7 +222,13 @@ pub enum SceneError {
     AlreadyCompleted,
     #[error("--vehicle-class needs a `{CLASSIFICATION}` attribute (LAS), which the scene has not")]
     NoClassification,
+    #[error("the scene spans {0:.0} × {1:.0} in its units, more than a tile of street (at most {MAX_SPAN} m a side): is it in metres, and one tile?")]
+    TooLarge(f64, f64),
 }
+
+/// The widest scene the ground filter takes, metres a side: MLS tiles are 50–500 m; at 0.5 m a
+/// cell its grid then holds at most 16 million cells.
+pub const MAX_SPAN: f64 = 2000.0;
 
 /// A point as (horizontal position, height) relative to `origin`, for the up axis.
 fn split(p: [f64; 3], origin: [f64; 3], up: UpAxis) -> ([f64; 2], f64) {
@@ -274,6 +280,10 @@ pub fn find_objects(
             (picked, None, 0)
         }
         Selection::Detect => {
+            let span = horizontal_span(&split_all);
+            if span[0] > MAX_SPAN || span[1] > MAX_SPAN {
+                return Err(SceneError::TooLarge(span[0], span[1]));
+            }
             let ground = Ground::fit(&split_all, &params.ground);
             let mut picked = Vec::new();
             let mut on_ground = 0;
@@ -317,6 +327,19 @@ pub fn find_objects(
         objects,
         ground_points,
     })
+}
+
+/// The extent of `points` along the two horizontal axes.
+fn horizontal_span(points: &[([f64; 2], f64)]) -> [f64; 2] {
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for (p, _) in points {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    [0, 1].map(|k| (hi[k] - lo[k]).max(0.0))
 }
 
 /// The whole cloud as one vehicle when its footprint fits the largest one's: a cut-out vehicle
@@ -775,6 +798,25 @@ mod tests {
         assert!(score.vehicles >= 6, "{score:?}");
         assert!(score.found * 10 >= score.vehicles * 9, "{score:?}");
         assert!(score.false_vehicles <= 1 && score.merged == 0, "{score:?}");
+    }
+
+    /// Two points 10 km apart would ask the ground grid for 4·10⁸ cells: refused in words.
+    #[test]
+    fn a_scene_wider_than_a_tile_is_refused() {
+        let mut cloud = street();
+        cloud.positions.push([
+            cloud.positions[0][0] + 10_000.0,
+            cloud.positions[0][1],
+            120.0,
+        ]);
+        let found = find_objects(
+            &cloud,
+            UpAxis::Z,
+            &Selection::Detect,
+            &SceneParams::default(),
+        );
+        let error = found.err().unwrap().to_string();
+        assert!(error.contains("spans 10000 × 10"), "{error}");
     }
 
     #[test]

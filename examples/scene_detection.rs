@@ -26,10 +26,6 @@ use mvpcc::metrics::compare_clouds;
 use mvpcc::scene::score::{detection, Detection};
 use mvpcc::scene::{complete_scene, find_objects, SceneParams, Selection, VEHICLE};
 
-/// Vehicles with fewer scanned points are not counted: [`SceneParams::min_points`], under which
-/// `--scene` does not look at an object.
-const MIN_POINTS: usize = 200;
-
 /// A real scan (y up, any scale) in place of the parked car nearest the right kerb of
 /// `street`: scaled to 4.5 m long, its length along the road, on the ground where that vehicle
 /// stood; the vehicle's points removed. Returns the street and the scan as placed.
@@ -139,7 +135,13 @@ fn main() {
         )
         .expect("detection needs no attribute");
         let is_vehicle = |l: u32| scene.objects[l as usize].kind == Kind::Vehicle;
-        let d = detection(&objects, &labels, is_vehicle, MIN_POINTS);
+        // Vehicles with fewer scanned points than `--scene` looks at are not counted.
+        let d = detection(
+            &objects,
+            &labels,
+            is_vehicle,
+            SceneParams::default().min_points,
+        );
         let missed: Vec<String> = d
             .missed
             .iter()

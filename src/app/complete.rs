@@ -162,14 +162,15 @@ impl FileReport {
     /// The line said for one completed file.
     pub fn summary(&self) -> String {
         if let Some(scene) = &self.scene {
+            let completed = scene.vehicles.iter().filter(|v| v.failed.is_none()).count();
             return format!(
-                "{}: {} points → {} ({} completed for {} of {} objects) in {:.2} s",
+                "{}: {} points → {} ({} completed for {} of {}) in {:.2} s",
                 self.output.display(),
                 self.input_points,
                 self.output_points,
                 self.added,
-                count(scene.vehicles.len(), "vehicle"),
-                scene.objects,
+                count(completed, "vehicle"),
+                count(scene.objects, "object"),
                 self.seconds.values().sum::<f64>()
             );
         }

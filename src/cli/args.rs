@@ -348,7 +348,7 @@ pub struct CompleteArgs {
         value_name = "W",
         value_parser = positive_length,
         allow_negative_numbers = true,
-        conflicts_with = "paper"
+        conflicts_with_all = ["paper", "scene"]
     )]
     pub vehicle_width: Option<f64>,
     /// The input is a whole street scan in metres (an MLS tile): find its vehicles, complete
@@ -644,7 +644,7 @@ pub struct SynthArgs {
     /// Whole scanned streets instead of objects, for `complete --scene`: OUT/street_NNNNN.las
     /// (z up, in UTM-sized metres, classified; each point's object in the `object` attribute;
     /// vehicles are class 64) and the objects' truth in OUT/street_NNNNN.json (docs/scenes.md).
-    #[arg(long, conflicts_with = "preview")]
+    #[arg(long, conflicts_with_all = ["preview", "category"])]
     pub scene: bool,
     /// With --scene: each street's length in metres.
     #[arg(long, requires = "scene", default_value_t = StreetParams::default().length)]

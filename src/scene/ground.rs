@@ -16,8 +16,9 @@ pub struct GroundParams {
     /// Cell side, metres: fine enough to follow a kerb, coarse enough that every cell of a road
     /// holds a return at MLS densities.
     pub cell: f64,
-    /// Wide opening window side, metres: wider than the widest vehicle (2.6 m) seen from one
-    /// side, whose far half lies in the scan's shadow and holds no ground returns.
+    /// Wide opening window side, metres (15 cells of 0.5 m): wider than the widest vehicle
+    /// (2.6 m) seen from one side, whose far half lies in the scan's shadow and holds no ground
+    /// returns.
     pub window: f64,
     /// Narrow opening window side, metres: narrower than a car's footprint, so that only what
     /// is lower than a kerb survives both openings' difference.
@@ -34,13 +35,16 @@ impl Default for GroundParams {
     fn default() -> Self {
         GroundParams {
             cell: 0.5,
-            window: 7.0,
+            window: 7.5,
             narrow_window: 1.5,
             step: 0.2,
             height: 0.25,
         }
     }
 }
+
+/// The most cells the ground grid holds (128 MB of heights and as much again for the openings).
+const MAX_CELLS: usize = 16_000_000;
 
 /// The ground surface as a grid over the scene's horizontal extent.
 #[derive(Debug, Clone)]
@@ -68,7 +72,10 @@ impl Ground {
             lo = [0.0; 2];
             hi = [0.0; 2];
         }
-        let cell = params.cell;
+        // A cell large enough that the grid stays within MAX_CELLS whatever the extent (a
+        // caller's units or a stray point): coarser than asked only past about 2 km a side.
+        let area = (hi[0] - lo[0]).max(0.0) * (hi[1] - lo[1]).max(0.0);
+        let cell = params.cell.max((area / MAX_CELLS as f64).sqrt());
         let cols = ((hi[0] - lo[0]) / cell).floor() as usize + 1;
         let rows = ((hi[1] - lo[1]) / cell).floor() as usize + 1;
         let mut ground = Ground {

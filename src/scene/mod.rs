@@ -40,6 +40,11 @@ pub struct VehicleSizes {
     /// Over the ground: from a low sports car (1.1 m, less the scan's reach under it) to a
     /// double-decker bus (4.4 m).
     pub height: [f64; 2],
+    /// The smallest length and height of an object narrower than `width` allows that may still
+    /// be a vehicle's flank: a van taller than the scanner shows its flank alone (4 m long, 2 m
+    /// high, less what the scan misses at its ends and at the ground); garden walls and fences
+    /// are rarely that high.
+    pub flank: [f64; 2],
 }
 
 impl Default for VehicleSizes {
@@ -48,22 +53,13 @@ impl Default for VehicleSizes {
             length: [1.4, 20.0],
             width: [0.5, 3.0],
             height: [0.9, 4.6],
+            flank: [4.0, 1.9],
         }
     }
 }
 
-/// The smallest flank that may stand for a whole vehicle seen from one side (length and height,
-/// metres): a van's (4 m long, 2 m high) less what the scan misses at its ends and at the ground;
-/// garden walls and fences are rarely that high.
-const FLANK: Footprint = Footprint {
-    centre: [0.0; 3],
-    length: 4.0,
-    width: 0.0,
-    height: 1.9,
-    axis_deg: 0.0,
-};
-
-/// An object whose top is within this of [`SceneParams::max_height`] is cut off there, metres.
+/// An object whose top is within this of [`SceneParams::max_height`] is cut off there, metres:
+/// the range noise of one return.
 const CUT_OFF: f64 = 0.05;
 
 /// How objects are found and which count as vehicles.
@@ -80,10 +76,10 @@ pub struct SceneParams {
     /// Points higher than this over the ground join no object, metres: above the tallest
     /// vehicle, so tree crowns and balconies do not join what stands under them.
     pub max_height: f64,
-    /// Points the ground filter took that lie at least this far above the ground and inside a
-    /// vehicle's footprint are given back to it, metres: its tyres' lower parts, above twice an
-    /// MLS scanner's range noise (a real car completes in a street closer to how it does alone
-    /// with them: lab/2026-12-07-scene-detection).
+    /// Points the ground filter took that lie at least this far above the ground surface (the
+    /// lowest returns, opened) and inside a vehicle's footprint are given back to it, metres: its
+    /// tyres' lower parts, and some road returns with them (a real car completes in a street
+    /// closer to how it does alone: lab/2026-12-07-scene-detection).
     pub lift: f64,
     pub sizes: VehicleSizes,
 }
@@ -186,6 +182,8 @@ fn cut_off_share(
 }
 
 impl Object {
+    /// From the footprint alone: a motorcycle is under 1.2 m wide and 2.8 m long, a car under
+    /// 5.4 m and 2.1 m high (a van is either), a truck, bus or tram over 7 m.
     pub fn guess(&self) -> Guess {
         let f = &self.footprint;
         if f.width < 1.2 && f.length < 2.8 {
@@ -222,7 +220,7 @@ pub enum SceneError {
     AlreadyCompleted,
     #[error("--vehicle-class needs a `{CLASSIFICATION}` attribute (LAS), which the scene has not")]
     NoClassification,
-    #[error("the scene spans {0:.0} × {1:.0} in its units, more than a tile of street (at most {MAX_SPAN} m a side): is it in metres, and one tile?")]
+    #[error("the scene spans {0:.0} × {1:.0} in its units, more than a tile of street (at most {MAX_SPAN} m a side): is it in metres, one tile, and free of stray far points?")]
     TooLarge(f64, f64),
 }
 
@@ -261,8 +259,13 @@ pub fn find_objects(
         .iter()
         .map(|&p| split(p, origin, up))
         .collect();
-    // A cloud no larger than the largest vehicle is one cut out already: one object, no ground.
-    if let Some(whole) = cut_out(&split_all, origin, up, params) {
+    // A cloud no larger than the largest vehicle is one cut out already: one object, no ground
+    // (where the input's classes say which points are vehicles, they decide).
+    let whole = match selection {
+        Selection::Detect => cut_out(&split_all, origin, up, params),
+        Selection::Classes(_) => None,
+    };
+    if let Some(whole) = whole {
         return Ok(Objects {
             objects: vec![whole],
             ground_points: 0,
@@ -343,7 +346,8 @@ fn horizontal_span(points: &[([f64; 2], f64)]) -> [f64; 2] {
 }
 
 /// The whole cloud as one vehicle when its footprint fits the largest one's: a cut-out vehicle
-/// given to `--scene` is completed as one (whatever its units, as the size test is not made).
+/// given to `--scene` is completed as one (in metres or smaller units: the size test is not
+/// made).
 fn cut_out(
     split_all: &[([f64; 2], f64)],
     origin: [f64; 3],
@@ -471,7 +475,7 @@ fn footprint(
 /// whatever its cut-off points say.
 fn verdict(f: &Footprint, cut: f64, params: &SceneParams) -> Verdict {
     let sizes = &params.sizes;
-    let flank = f.length >= FLANK.length && f.height >= FLANK.height;
+    let flank = f.length >= sizes.flank[0] && f.height >= sizes.flank[1];
     let checks = [
         (cut > 0.5, Verdict::TooTall),
         (f.length < sizes.length[0], Verdict::TooShort),
@@ -565,13 +569,11 @@ pub fn complete_scene(
         match run {
             Ok(run) => {
                 let done = run.completion;
-                let flags = &done
-                    .cloud
-                    .attribute(SYNTHETIC)
-                    .expect("a completion flags its points")
-                    .values;
-                let keep: Vec<bool> = flags.iter().map(|&f| f == 1.0).collect();
-                let added = done.cloud.filter(&keep);
+                // The completion holds the vehicle's own points, then the ones it added (a
+                // scene point may carry the synthetic flag already, so the flag cannot tell).
+                let n = done.cloud.len();
+                let added_points: Vec<usize> = (n - done.added..n).collect();
+                let added = done.cloud.select(&added_points);
                 report.added = added.len();
                 report.mirrored = done.mirrored;
                 report.heading = run.orientation.heading;

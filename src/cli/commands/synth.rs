@@ -17,8 +17,13 @@ pub(super) fn run(args: SynthArgs, log: Log) -> anyhow::Result<()> {
         let start = std::time::Instant::now();
         let written =
             generate_streets(&args.out, args.count, options.seed, &params, &Bar::new(log))?;
+        let streets = if written.len() == 1 {
+            "street"
+        } else {
+            "streets"
+        };
         log.info(format!(
-            "wrote {} streets of {} m to {} in {:.1} s",
+            "wrote {} {streets} of {} m to {} in {:.1} s",
             written.len(),
             params.length,
             args.out.display(),

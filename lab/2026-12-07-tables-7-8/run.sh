@@ -2,15 +2,18 @@
 # The paper's Tables 7 (erosion) and 8 (statistical outlier filter) with the built-in model
 # (XYZRGB; the paper's rows are its XYZ-only model) in `complete --paper` on the procedural
 # validation split (seed 8, 300 partials), scored against the fine ground truth at τ = 0.01.
-# Usage: run.sh MVPCC DATA OUT
+# Usage: run.sh MVPCC DATA OUT [COMPLETE OPTIONS...]  (e.g. --model XYZ.safetensors: the
+# options go to every row's `complete`)
 set -euo pipefail
 m=${1:?MVPCC} data=${2:?DATA} out=${3:?OUT}
+shift 3
+model=("$@")
 mkdir -p "$out"
 row() { # name, then complete's options
   local name=$1; shift
   rm -rf "$out/$name"
   "$m" -q complete --paper --input-dir "$data/clouds/test" --include 'partial_*.ply' \
-    --output-dir "$out/$name" --jobs 2 "$@"
+    --output-dir "$out/$name" --jobs 2 "${model[@]}" "$@"
   "$m" eval --data "$data" --pred-dir "$out/$name" --tau 0.01 > "$out/$name.txt"
   awk -v w="$name" '$1 == "all" { print w "," $6 "," $5 "," $8 }' "$out/$name.txt"
 }

@@ -414,7 +414,7 @@ pub struct StreetScan {
     pub triangles: Vec<usize>,
 }
 
-/// Scans `mesh` (y up) with `scanner`: each side of the path is swept as [`profile_scan`]
+/// Scans `mesh` (y up) with `scanner`: each side of the path is swept as the profile scanner
 /// sweeps one side of an object, so the nearest surface along each ray occludes the rest.
 pub fn scan_street(mesh: &Mesh, scanner: &StreetScanner, rng: &mut Lcg) -> StreetScan {
     let mut out = StreetScan::default();

@@ -19,7 +19,7 @@ use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::{Completer, Options, Settings};
 use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::UpAxis;
-use mvpcc::datagen::synth::street::{street, Kind, StreetParams, OBJECT};
+use mvpcc::datagen::synth::street::{street, Kind, StreetParams};
 use mvpcc::datagen::synth::Category;
 use mvpcc::io::read_cloud;
 use mvpcc::metrics::compare_clouds;
@@ -28,12 +28,13 @@ use mvpcc::scene::{complete_scene, find_objects, SceneParams, Selection, VEHICLE
 
 /// A real scan (y up, any scale) in place of the parked car nearest the right kerb of
 /// `street`: scaled to 4.5 m long, its length along the road, on the ground where that vehicle
-/// stood; the vehicle's points removed. Returns the street and the scan as placed.
+/// stood; the vehicle's points removed. Returns the street, the scan as placed and the labels of
+/// the street's points left.
 fn with_real_car(
     street: &mvpcc::datagen::synth::street::Street,
     labels: &[u32],
     real: &PointCloud,
-) -> (PointCloud, PointCloud) {
+) -> (PointCloud, PointCloud, Vec<u32>) {
     let spot = street
         .objects
         .iter()
@@ -42,6 +43,7 @@ fn with_real_car(
         .expect("a parked car");
     let keep: Vec<bool> = labels.iter().map(|&l| l != spot.id).collect();
     let mut scene = street.cloud.filter(&keep);
+    let kept = labels.iter().copied().filter(|&l| l != spot.id).collect();
     let bounds = real.bounds().expect("a scan has points");
     let scale = 4.5 / bounds.extent()[2];
     let mid = bounds.center();
@@ -58,7 +60,19 @@ fn with_real_car(
     car.colors = None;
     scene.attributes.clear();
     scene.append(car.clone());
-    (scene, car)
+    (scene, car, kept)
+}
+
+/// What `complete --scene` runs each vehicle with on a generated street (LAS: z up).
+fn street_settings() -> Settings {
+    Settings {
+        clean: false,
+        orient: OrientMode::Auto,
+        options: Options {
+            up: UpAxis::Z,
+            ..Options::default()
+        },
+    }
 }
 
 /// The true object most of `indices` belong to.
@@ -119,14 +133,7 @@ fn main() {
         complete.then(|| Completer::builtin(Device::flex()).expect("the built-in model"));
     for seed in seeds {
         let scene = street(seed, &params);
-        let labels: Vec<u32> = scene
-            .cloud
-            .attribute(OBJECT)
-            .expect("a generated street labels its points")
-            .values
-            .iter()
-            .map(|&o| o as u32)
-            .collect();
+        let labels = scene.labels();
         let objects = find_objects(
             &scene.cloud,
             UpAxis::Z,
@@ -199,14 +206,7 @@ fn main() {
         // The completed points given to objects that are no vehicle.
         let (added, astray) = match &completer {
             Some(completer) => {
-                let settings = Settings {
-                    clean: false,
-                    orient: OrientMode::Auto,
-                    options: Options {
-                        up: UpAxis::Z,
-                        ..Options::default()
-                    },
-                };
+                let settings = street_settings();
                 let done = complete_scene(&scene.cloud, &objects, completer, &settings)
                     .expect("a generated street has no vehicle attribute");
                 // Vehicle k + 1 is the k-th object taken for one; it is astray when most of
@@ -244,25 +244,11 @@ fn main() {
     }
     for (name, real) in &reals {
         let completer = completer.as_ref().expect("--real needs --complete");
-        let settings = Settings {
-            clean: false,
-            orient: OrientMode::Auto,
-            options: Options {
-                up: UpAxis::Z,
-                ..Options::default()
-            },
-        };
+        let settings = street_settings();
         for &seed in &real_seeds {
             let scene = street(seed, &params);
-            let labels: Vec<u32> = scene
-                .cloud
-                .attribute(OBJECT)
-                .expect("labels")
-                .values
-                .iter()
-                .map(|&o| o as u32)
-                .collect();
-            let (cloud, car) = with_real_car(&scene, &labels, real);
+            let labels = scene.labels();
+            let (cloud, car, kept) = with_real_car(&scene, &labels, real);
             let alone = completer
                 .run(&car, &settings)
                 .expect("the real car completes")
@@ -295,19 +281,6 @@ fn main() {
                 compare_clouds(&points, &alone.positions, &[0.045]).fscores[0].f1
             });
             if why {
-                let kept: Vec<u32> = labels
-                    .iter()
-                    .copied()
-                    .filter(|&l| {
-                        l != scene
-                            .objects
-                            .iter()
-                            .filter(|o| o.category == Some(Category::Car) && !o.driving)
-                            .max_by(|a, b| a.centre[1].total_cmp(&b.centre[1]))
-                            .expect("spot")
-                            .id
-                    })
-                    .collect();
                 if let Some((_, o)) = best {
                     let mut kinds = std::collections::BTreeMap::<String, usize>::new();
                     for &i in o.indices.iter().filter(|&&i| i < first) {

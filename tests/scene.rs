@@ -91,6 +91,12 @@ fn unchanged_then_appended(input: &PointCloud, output: &PointCloud) {
     assert_eq!(output.quantization, input.quantization);
 }
 
+/// The points of `cloud` in LAS class `class`.
+fn count_class(cloud: &PointCloud, class: f64) -> usize {
+    let classes = &cloud.attribute("classification").unwrap().values;
+    classes.iter().filter(|&&c| c == class).count()
+}
+
 fn report(output: &std::process::Output) -> serde_json::Value {
     serde_json::from_slice(&output.stdout).unwrap()
 }
@@ -179,13 +185,7 @@ fn classes_name_the_vehicles_and_a_class_the_file_lacks_is_said() {
     // The labelled cars alone: none of the road, nothing rejected.
     assert_eq!(json["scene"]["objects"], 2);
     let scanned = read(&input);
-    let car_points = scanned
-        .attribute("classification")
-        .unwrap()
-        .values
-        .iter()
-        .filter(|&&c| c == CLASS_CAR)
-        .count();
+    let car_points = count_class(&scanned, CLASS_CAR);
     let counted: u64 = cars.iter().map(|c| c["points"].as_u64().unwrap()).sum();
     assert_eq!(counted as usize, car_points);
     unchanged_then_appended(&scanned, &read(&output));
@@ -355,13 +355,7 @@ fn classes_decide_in_a_small_clip_and_are_needed() {
         })
         .collect();
     let clip = full.filter(&keep);
-    let cars = clip
-        .attribute("classification")
-        .unwrap()
-        .values
-        .iter()
-        .filter(|&&c| c == CLASS_CAR)
-        .count();
+    let cars = count_class(&clip, CLASS_CAR);
     let input = write(&dir, "clip.las", &clip);
     let run = mvpcc()
         .args([

@@ -270,7 +270,9 @@ pub fn complete_file(
     let settings = (job.settings)(input);
     if let Some(scene) = &job.scene {
         let dropped = loaded.non_finite_dropped;
-        return complete_scene_file(input, output, format, cloud, dropped, read, scene, job);
+        return complete_scene_file(
+            input, output, format, cloud, dropped, read, scene, &settings, job,
+        );
     }
     let mut run = job
         .completer
@@ -342,9 +344,9 @@ fn complete_scene_file(
     non_finite_dropped: usize,
     read: std::time::Duration,
     scene: &SceneJob,
+    settings: &Settings,
     job: &Job,
 ) -> Result<FileReport, FileError> {
-    let settings = (job.settings)(input);
     let fail = |source| FileError::Scene {
         path: input.to_path_buf(),
         source,
@@ -352,7 +354,7 @@ fn complete_scene_file(
     let start = Instant::now();
     let objects =
         find_objects(&cloud, settings.options.up, &scene.selection, &scene.params).map_err(fail)?;
-    let done = complete_scene(&cloud, &objects, job.completer, &settings).map_err(fail)?;
+    let done = complete_scene(&cloud, &objects, job.completer, settings).map_err(fail)?;
     let mut warnings: Vec<String> = non_finite_warning(non_finite_dropped).into_iter().collect();
     if let Selection::Classes(codes) = &scene.selection {
         let classes = cloud.attribute(CLASSIFICATION).map(|a| &a.values);

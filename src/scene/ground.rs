@@ -60,18 +60,7 @@ pub struct Ground {
 impl Ground {
     /// The ground under `points`, each given as (horizontal position, height).
     pub fn fit(points: &[([f64; 2], f64)], params: &GroundParams) -> Ground {
-        let mut lo = [f64::INFINITY; 2];
-        let mut hi = [f64::NEG_INFINITY; 2];
-        for (p, _) in points {
-            for k in 0..2 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        if points.is_empty() {
-            lo = [0.0; 2];
-            hi = [0.0; 2];
-        }
+        let [lo, hi] = horizontal_bounds(points);
         // A cell large enough that the grid stays within MAX_CELLS whatever the extent (a
         // caller's units or a stray point): coarser than asked only past about 2 km a side.
         let area = (hi[0] - lo[0]).max(0.0) * (hi[1] - lo[1]).max(0.0);
@@ -131,35 +120,54 @@ impl Ground {
         combine: impl Fn(f64, f64) -> f64,
     ) -> Vec<f64> {
         let (cols, rows) = (self.cols, self.rows);
-        let mut along_rows = vec![f64::INFINITY; values.len()];
-        for r in 0..rows {
-            for c in 0..cols {
-                let k = radius.min(c).min(cols - 1 - c);
-                let span = c - k..c + k + 1;
-                along_rows[r * cols + c] = span
-                    .map(|k| values[r * cols + k])
-                    .reduce(&combine)
-                    .expect("a window holds its own cell");
-            }
-        }
-        let mut out = vec![f64::INFINITY; values.len()];
-        for r in 0..rows {
-            for c in 0..cols {
-                let k = radius.min(r).min(rows - 1 - r);
-                let span = r - k..r + k + 1;
-                out[r * cols + c] = span
-                    .map(|k| along_rows[k * cols + c])
-                    .reduce(&combine)
-                    .expect("a window holds its own cell");
-            }
-        }
-        out
+        let along_rows = window_pass(values, [rows, cols], [cols, 1], radius, &combine);
+        window_pass(&along_rows, [cols, rows], [1, cols], radius, &combine)
     }
 
     /// The ground's height under `p`: infinite where the scan saw no ground near it.
     pub fn height_at(&self, p: [f64; 2]) -> f64 {
         self.heights[self.index(p)]
     }
+}
+
+/// `values` (a grid) combined over a window of `radius` cells along one axis: `counts` are the
+/// other axis's cells and this one's, `strides` their steps in `values`. Near the edge the window
+/// shrinks on both sides alike.
+fn window_pass(
+    values: &[f64],
+    counts: [usize; 2],
+    strides: [usize; 2],
+    radius: usize,
+    combine: &impl Fn(f64, f64) -> f64,
+) -> Vec<f64> {
+    let mut out = vec![f64::INFINITY; values.len()];
+    let n = counts[1];
+    for a in 0..counts[0] {
+        for b in 0..n {
+            let k = radius.min(b).min(n - 1 - b);
+            out[a * strides[0] + b * strides[1]] = (b - k..b + k + 1)
+                .map(|j| values[a * strides[0] + j * strides[1]])
+                .reduce(combine)
+                .expect("a window holds its own cell");
+        }
+    }
+    out
+}
+
+/// The lowest and highest horizontal coordinates of `points` (both zero when there are none).
+pub fn horizontal_bounds(points: &[([f64; 2], f64)]) -> [[f64; 2]; 2] {
+    if points.is_empty() {
+        return [[0.0; 2]; 2];
+    }
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for (p, _) in points {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    [lo, hi]
 }
 
 #[cfg(test)]

@@ -271,7 +271,8 @@ pub fn find_objects(
             ground_points: 0,
         });
     }
-    // The candidates, and the ground's height under each (None: each object's lowest point).
+    // The candidates, the ground (None: each object's lowest point is its base) with the points
+    // just above it that a vehicle may take back, and how many points are ground.
     let (candidates, ground, ground_points) = match selection {
         Selection::Classes(codes) => {
             let classes = cloud
@@ -283,22 +284,26 @@ pub fn find_objects(
             (picked, None, 0)
         }
         Selection::Detect => {
-            let span = horizontal_span(&split_all);
+            let [lo, hi] = ground::horizontal_bounds(&split_all);
+            let span = [hi[0] - lo[0], hi[1] - lo[1]];
             if span[0] > MAX_SPAN || span[1] > MAX_SPAN {
                 return Err(SceneError::TooLarge(span[0], span[1]));
             }
             let ground = Ground::fit(&split_all, &params.ground);
-            let mut picked = Vec::new();
+            let (mut picked, mut low) = (Vec::new(), Vec::new());
             let mut on_ground = 0;
             for (i, &(p, h)) in split_all.iter().enumerate() {
                 let above = h - ground.height_at(p);
                 if above <= params.ground.height {
                     on_ground += 1;
+                    if above >= params.lift {
+                        low.push(i);
+                    }
                 } else if above <= params.max_height {
                     picked.push(i);
                 }
             }
-            (picked, Some(ground), on_ground)
+            (picked, Some((ground, low)), on_ground)
         }
     };
     let local: Vec<[f64; 3]> = candidates
@@ -312,7 +317,13 @@ pub fn find_objects(
         .into_iter()
         .map(|members| {
             let indices: Vec<usize> = members.iter().map(|&k| candidates[k]).collect();
-            let footprint = footprint(&indices, &split_all, ground.as_ref(), origin, up);
+            let footprint = footprint(
+                &indices,
+                &split_all,
+                ground.as_ref().map(|g| &g.0),
+                origin,
+                up,
+            );
             let (_, base) = split(footprint.centre, origin, up);
             let cut = cut_off_share(&indices, &split_all, &footprint, base, params.max_height);
             let verdict = verdict(&footprint, cut, params);
@@ -323,26 +334,13 @@ pub fn find_objects(
             }
         })
         .collect();
-    if let Some(ground) = &ground {
-        give_back_lowest(&mut objects, &split_all, ground, origin, up, params);
+    if let Some((_, low)) = &ground {
+        give_back_lowest(&mut objects, &split_all, low, origin, up);
     }
     Ok(Objects {
         objects,
         ground_points,
     })
-}
-
-/// The extent of `points` along the two horizontal axes.
-fn horizontal_span(points: &[([f64; 2], f64)]) -> [f64; 2] {
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
-    for (p, _) in points {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    [0, 1].map(|k| (hi[k] - lo[k]).max(0.0))
 }
 
 /// The whole cloud as one vehicle when its footprint fits the largest one's: a cut-out vehicle
@@ -367,24 +365,16 @@ fn cut_out(
     })
 }
 
-/// Gives each vehicle the points the ground filter took from it: those inside its footprint at
-/// least [`SceneParams::lift`] above the ground. Its points
+/// Gives each vehicle the points the ground filter took from it: those of `low` (at least
+/// [`SceneParams::lift`] above the ground) inside its footprint. Its points
 /// then run down to its tyres' contact instead of stopping at the ground threshold.
 fn give_back_lowest(
     objects: &mut [Object],
     split_all: &[([f64; 2], f64)],
-    ground: &Ground,
+    low: &[usize],
     origin: [f64; 3],
     up: UpAxis,
-    params: &SceneParams,
 ) {
-    let low: Vec<usize> = (0..split_all.len())
-        .filter(|&i| {
-            let (p, h) = split_all[i];
-            let above = h - ground.height_at(p);
-            (params.lift..=params.ground.height).contains(&above)
-        })
-        .collect();
     for object in objects.iter_mut().filter(|o| o.verdict == Verdict::Vehicle) {
         let f = object.footprint;
         let (centre, _) = split(f.centre, origin, up);
@@ -774,20 +764,13 @@ mod tests {
     /// (`examples/scene_detection.rs`).
     #[test]
     fn the_vehicles_of_a_generated_street_are_found() {
-        use crate::datagen::synth::street::{street, Kind, StreetParams, OBJECT};
+        use crate::datagen::synth::street::{street, Kind, StreetParams};
         let params = StreetParams {
             length: 40.0,
             ..StreetParams::default()
         };
         let scene = street(31, &params);
-        let labels: Vec<u32> = scene
-            .cloud
-            .attribute(OBJECT)
-            .unwrap()
-            .values
-            .iter()
-            .map(|&o| o as u32)
-            .collect();
+        let labels = scene.labels();
         let found = find_objects(
             &scene.cloud,
             UpAxis::Z,

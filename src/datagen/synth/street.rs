@@ -92,6 +92,19 @@ pub struct Street {
     pub objects: Vec<TruthObject>,
 }
 
+impl Street {
+    /// Each point's object (its [`TruthObject::id`]), from the [`OBJECT`] attribute.
+    pub fn labels(&self) -> Vec<u32> {
+        self.cloud
+            .attribute(OBJECT)
+            .expect("a generated street labels its points")
+            .values
+            .iter()
+            .map(|&o| o as u32)
+            .collect()
+    }
+}
+
 /// Where a generated street lies, as MLS tiles do: UTM-sized coordinates.
 pub const STREET_OFFSET: [f64; 3] = [652_000.0, 5_280_000.0, 110.0];
 

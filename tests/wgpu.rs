@@ -89,6 +89,7 @@ const LOGIT_TOLERANCE: f32 = 1e-3;
 #[test]
 fn the_forward_pass_on_wgpu_matches_the_cpu_for_the_tiny_and_built_in_models() {
     let (cpu, gpu) = (Device::flex(), wgpu());
+    cpu.seed(5);
     let tiny = Preset::Tiny.config();
     let tiny_bytes = generator_to_bytes(&tiny.init_generator(&cpu).unwrap(), &tiny).unwrap();
     for (name, bytes) in [("tiny", tiny_bytes.as_slice()), ("built-in", DEFAULT_MODEL)] {
@@ -145,6 +146,11 @@ fn batch(config: &ModelConfig, device: &Device) -> Batch {
 #[test]
 fn one_training_step_on_wgpu_matches_the_cpu() {
     let (cpu, gpu) = (Device::flex().autodiff(), wgpu().autodiff());
+    // Fixed weights: with fresh ones each run, now and then a pre-activation lies within
+    // rounding of a ReLU's kink, the backends take different branches and the stepped logits
+    // land 1.4e-3 apart (a CI run did; they are usually within 3e-5), which says nothing
+    // about the gradients.
+    cpu.seed(5);
     let config = Preset::Tiny.config();
     let bytes = (
         generator_to_bytes(&config.init_generator(&cpu).unwrap(), &config).unwrap(),
@@ -174,10 +180,12 @@ fn one_training_step_on_wgpu_matches_the_cpu() {
     let images = largest_difference(&images_cpu, &images_gpu);
     let logits = largest_difference(&logits_cpu, &logits_gpu);
     eprintln!("after one step: images differ by at most {images:e}, logits by {logits:e}");
+    let before = stepped(&bytes.0);
+    let moved = largest_difference(&before.0, &images_cpu);
+    let moved_logits = largest_difference(&before.1, &logits_cpu);
+    eprintln!("the step moved the images by up to {moved:e}, logits by {moved_logits:e}");
     assert!(images <= IMAGE_TOLERANCE && logits <= LOGIT_TOLERANCE);
     // The step moved the output far more than the backends differ.
-    let moved = largest_difference(&stepped(&bytes.0).0, &images_cpu);
-    eprintln!("the step moved the images by up to {moved:e}");
     assert!(
         moved > 100.0 * IMAGE_TOLERANCE,
         "the step moved the images by {moved} only"

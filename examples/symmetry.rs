@@ -18,7 +18,9 @@
 //! scan as it is.
 //!
 //! `cargo run --release --example symmetry -- --data DATA [--true-width] [--true-heading]
-//! [--limit N] [--json FILE]` or `-- --mls DIR [--seed N] [--turns N] [--json FILE]`
+//! [--kind scanner|cameras] [--network] [--limit N] [--json FILE] [--tuning FILE]` or
+//! `-- --mls DIR [--seed N] [--turns N] [--json FILE] [--tuning FILE]`. `--network` also scores
+//! `complete`'s default (the network method); `--tuning` reads `complete --tuning`'s file.
 //!
 //! Choices are made on the validation split (`scripts/judge-leg.sh` makes it in target/valset;
 //! small gains are checked on three more seeds, docs/quality.md, *The splits*); the test split is
@@ -27,7 +29,7 @@
 use burn::tensor::Device;
 use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::symmetry::mirror;
-use mvpcc::complete::{Completer, Completion, Method, Options, Settings};
+use mvpcc::complete::{Completer, Completion, Method, Options, Settings, Tuning};
 use mvpcc::core::cloud::{Aabb, PointCloud};
 use mvpcc::core::knn::KnnIndex;
 use mvpcc::core::rng::Lcg;
@@ -56,6 +58,16 @@ struct Given {
     width: bool,
     /// The object's heading (`--true-heading`).
     heading: bool,
+}
+
+/// How every partial is completed besides the truth given.
+#[derive(Debug, Clone)]
+struct Run {
+    given: Given,
+    /// `--tuning FILE`'s tunables, as `complete --tuning` reads them.
+    tuning: Tuning,
+    /// Whether the network method (`complete`'s default) is also scored (`--network`).
+    network: bool,
 }
 
 /// Where each cue of the plane put it across the object's centre line, over its length,
@@ -94,6 +106,11 @@ struct Sample {
     f1_partial: f64,
     f1_mirror: f64,
     f1_true: f64,
+    /// Whether the cues vouch for the plane (else `complete` warns and the network fills the
+    /// far side).
+    vouched: Option<bool>,
+    /// F1@0.01 of `complete`'s default (the network method), with `--network`.
+    f1_network: Option<f64>,
 }
 
 /// `complete --method mirror` with everything estimated, or the heading taken as the input's
@@ -103,8 +120,16 @@ fn mirrored(
     cloud: &PointCloud,
     vehicle_width: Option<f64>,
     orient: OrientMode,
+    tuning: &Tuning,
 ) -> Result<Completion, Error> {
-    completed(completer, cloud, vehicle_width, orient, Method::Mirror)
+    completed(
+        completer,
+        cloud,
+        vehicle_width,
+        orient,
+        Method::Mirror,
+        tuning,
+    )
 }
 
 /// `complete --method METHOD` with the given orientation.
@@ -114,6 +139,7 @@ fn completed(
     vehicle_width: Option<f64>,
     orient: OrientMode,
     method: Method,
+    tuning: &Tuning,
 ) -> Result<Completion, Error> {
     let settings = Settings {
         clean: false,
@@ -121,6 +147,7 @@ fn completed(
         options: Options {
             method,
             vehicle_width,
+            tuning: tuning.clone(),
             ..Options::default()
         },
     };
@@ -152,8 +179,9 @@ fn measure(
     partial: &Path,
     gt: &[[f64; 3]],
     spec: &PartialSpec,
-    given: Given,
+    run: &Run,
 ) -> Result<Sample, Error> {
+    let given = run.given;
     let mut cloud = read_cloud(partial, None)?.cloud;
     let bounds = Aabb::of(gt).ok_or("empty ground truth")?;
     let width = given.width.then(|| bounds.max[0] - bounds.min[0]);
@@ -172,7 +200,20 @@ fn measure(
             spec.points_to_object_frame(points)
         }
     };
-    let completion = mirrored(completer, &cloud, width, orient)?;
+    let completion = mirrored(completer, &cloud, width, orient, &run.tuning)?;
+    let f1_network = if run.network {
+        let done = completed(
+            completer,
+            &cloud,
+            width,
+            orient,
+            Method::Network,
+            &run.tuning,
+        )?;
+        Some(f1(&to_object(&done.cloud.positions), gt))
+    } else {
+        None
+    };
     let measured = to_object(&cloud.positions);
     let completed = to_object(&completion.cloud.positions);
     let length = bounds.longest_side();
@@ -233,6 +274,8 @@ fn measure(
         f1_partial: f1(&measured, gt),
         f1_mirror: f1(&completed, gt),
         f1_true: f1(&true_mirror(&measured, tolerance), gt),
+        vouched: completion.plane.map(|p| p.vouched),
+        f1_network,
     })
 }
 
@@ -290,8 +333,12 @@ struct FoundPlane {
     normal: [f64; 3],
 }
 
-fn plane_of(completer: &Completer, cloud: &PointCloud) -> Result<Option<FoundPlane>, Error> {
-    let done = mirrored(completer, cloud, None, OrientMode::Auto)?;
+fn plane_of(
+    completer: &Completer,
+    cloud: &PointCloud,
+    tuning: &Tuning,
+) -> Result<Option<FoundPlane>, Error> {
+    let done = mirrored(completer, cloud, None, OrientMode::Auto, tuning)?;
     let Some(plane) = done.plane else {
         return Ok(None);
     };
@@ -351,6 +398,7 @@ fn real_scans(
     dir: &str,
     seed: u64,
     turns: usize,
+    tuning: &Tuning,
 ) -> Result<Vec<Turned>, Error> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -366,7 +414,7 @@ fn real_scans(
     for path in &files {
         let cloud = read_cloud(path, None)?.cloud;
         let name = path.file_name().unwrap_or_default().to_string_lossy();
-        let own = plane_of(completer, &cloud)?;
+        let own = plane_of(completer, &cloud, tuning)?;
         let pivot = cloud.bounds().map_or([0.0; 3], |b| b.center());
         for _ in 0..turns {
             let turn = rng.range(-180.0, 180.0);
@@ -378,7 +426,7 @@ fn real_scans(
                     .collect(),
                 ..cloud.clone()
             };
-            let found = plane_of(completer, &rotated)?;
+            let found = plane_of(completer, &rotated, tuning)?;
             let plane_apart = match (&own, &found) {
                 (Some(own), Some(found)) => {
                     let point = turned(found.point, -turn, pivot);
@@ -391,7 +439,14 @@ fn real_scans(
                 }
                 _ => None,
             };
-            let done = completed(completer, &rotated, None, OrientMode::Auto, Method::Network)?;
+            let done = completed(
+                completer,
+                &rotated,
+                None,
+                OrientMode::Auto,
+                Method::Network,
+                tuning,
+            )?;
             let (width_over_length, body_width_over_length, beyond_scan) = across(&done);
             let row = Turned {
                 scan: name.to_string(),
@@ -421,11 +476,15 @@ fn real_scans(
 }
 
 fn main() -> Result<(), Error> {
+    let tuning = match arg("--tuning") {
+        Some(path) => Tuning::read(Path::new(&path))?,
+        None => Tuning::default(),
+    };
     if let Some(dir) = arg("--mls") {
         let completer = Completer::builtin(Device::flex())?;
         let seed = arg("--seed").map_or(Ok(1), |s| s.parse())?;
         let turns = arg("--turns").map_or(Ok(8), |s| s.parse())?;
-        let rows = real_scans(&completer, &dir, seed, turns)?;
+        let rows = real_scans(&completer, &dir, seed, turns, &tuning)?;
         if let Some(path) = arg("--json") {
             std::fs::write(path, serde_json::to_string_pretty(&rows)?)?;
         }
@@ -433,10 +492,15 @@ fn main() -> Result<(), Error> {
     }
     let data = PathBuf::from(arg("--data").ok_or("--data DIR is required")?);
     let flag = |name: &str| std::env::args().any(|a| a == name);
-    let given = Given {
-        width: flag("--true-width"),
-        heading: flag("--true-heading"),
+    let run = Run {
+        given: Given {
+            width: flag("--true-width"),
+            heading: flag("--true-heading"),
+        },
+        tuning,
+        network: flag("--network"),
     };
+    let kind = arg("--kind");
     let limit: usize = arg("--limit").map_or(Ok(usize::MAX), |l| l.parse())?;
     let manifest: Manifest =
         serde_json::from_str(&std::fs::read_to_string(data.join("manifest.json"))?)?;
@@ -447,6 +511,7 @@ fn main() -> Result<(), Error> {
         .iter()
         .filter(|m| m.split == TEST)
         .flat_map(|m| m.samples.iter().map(move |s| (m, s)))
+        .filter(|(_, s)| kind.as_deref().is_none_or(|k| k == s.spec.protocol()))
         .take(limit)
         .collect();
     let samples: Vec<Sample> = jobs
@@ -457,7 +522,7 @@ fn main() -> Result<(), Error> {
             let partial = clouds.join(format!("partial_{}.ply", sample.k));
             let name = format!("{}/{}/partial_{}", model.category, model.name, sample.k);
             let names = (name, model.category.clone());
-            measure(&completer, names, &partial, &gt, &sample.spec, given)
+            measure(&completer, names, &partial, &gt, &sample.spec, &run)
         })
         .collect::<Result<_, Error>>()?;
 

@@ -147,7 +147,7 @@ fn completed(
         options: Options {
             method,
             vehicle_width,
-            tuning: tuning.clone(),
+            tuning: *tuning,
             ..Options::default()
         },
     };

@@ -5,7 +5,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use mvpcc::complete::orient::{orient, OrientMode, OrientParams, Orienter};
-use mvpcc::complete::symmetry::{find_plane, SymmetryParams};
+use mvpcc::complete::symmetry::{find_plane, SymmetryParams, Width};
 use mvpcc::core::frame::{Frame, UpAxis};
 use mvpcc::core::rng::Lcg;
 use mvpcc::datagen::mesh::SignedAxis;
@@ -74,7 +74,7 @@ fn symmetry(c: &mut Criterion) {
     });
     group.bench_function(
         format!("{} points (bus driven past), width given", bus.len()),
-        |b| b.iter(|| find_plane(&bus, Some(width), &SymmetryParams::default())),
+        |b| b.iter(|| find_plane(&bus, Some(Width::Known(width)), &SymmetryParams::default())),
     );
     group.finish();
 }

@@ -10,7 +10,11 @@
 //! counts the completed points given to objects that are no vehicle; `--real DIR
 //! [--real-seeds 201,202]`: each scan in DIR, scaled to a car's length, put in place of a
 //! parked vehicle of each street, completed there and alone, and the two compared by F1 at 1 %
-//! of its length)
+//! of its length; `--vehicles FILE`: with `--complete`, one CSV line per vehicle found: how far
+//! its symmetry plane lies from the true centre line, and the F1 at 1 % of its length between
+//! its completion in the street and the completion of its own points alone, cut out by their
+//! labels; `--no-width-prior`: each plane from its scan alone, as for a cut-out vehicle in
+//! unknown units)
 //!
 //! Seeds 1–20 are for choices; the report's figures are measured once on seeds 101–110.
 
@@ -24,7 +28,7 @@ use mvpcc::datagen::synth::Category;
 use mvpcc::io::read_cloud;
 use mvpcc::metrics::compare_clouds;
 use mvpcc::scene::score::{detection, Detection};
-use mvpcc::scene::{complete_scene, find_objects, SceneParams, Selection, VEHICLE};
+use mvpcc::scene::{complete_scene, find_objects, Narrowest, SceneParams, Selection, VEHICLE};
 
 /// A real scan (y up, any scale) in place of the parked car nearest the right kerb of
 /// `street`: scaled to 4.5 m long, its length along the road, on the ground where that vehicle
@@ -86,6 +90,79 @@ fn majority(indices: &[usize], labels: &[u32]) -> u32 {
         .map_or(0, |(l, _)| l)
 }
 
+/// One CSV line per vehicle found in a street (`--vehicles`): its plane's distance from the
+/// true centre line (metres and share of its length) and the F1 at 1 % of its length between
+/// its completion in the street and that of its labelled points alone.
+#[allow(clippy::too_many_arguments)]
+fn vehicle_rows(
+    seed: u64,
+    scene: &mvpcc::datagen::synth::street::Street,
+    labels: &[u32],
+    objects: &mvpcc::scene::Objects,
+    done: &mvpcc::scene::SceneCompletion,
+    completer: &Completer,
+    settings: &Settings,
+    narrowest: &Narrowest,
+) -> Vec<String> {
+    let ids = &done.cloud.attribute(VEHICLE).expect("numbered").values;
+    let n = scene.cloud.len();
+    objects
+        .vehicles()
+        .zip(&done.vehicles)
+        .filter_map(|(o, report)| {
+            let truth = &scene.objects[majority(&o.indices, labels) as usize];
+            if truth.kind != Kind::Vehicle {
+                return None;
+            }
+            let length = truth.size[0];
+            // The vehicles stand along the street (x), so the true plane is y = centre's y.
+            let off = report.plane.map(|p| {
+                let d: f64 = (0..3)
+                    .map(|i| p.normal[i] * (truth.centre[i] - p.point[i]))
+                    .sum();
+                d.abs()
+            });
+            let own: Vec<usize> = (0..n).filter(|&i| labels[i] == truth.id).collect();
+            let mut alone_settings = settings.clone();
+            alone_settings.options.min_vehicle_width = narrowest.of(o.guess());
+            let alone = completer
+                .run(&scene.cloud.select(&own), &alone_settings)
+                .ok()?
+                .completion
+                .cloud;
+            let id = report.id as f64;
+            let mut street: Vec<[f64; 3]> = o
+                .indices
+                .iter()
+                .map(|&i| scene.cloud.positions[i])
+                .collect();
+            street.extend(
+                (n..done.cloud.len())
+                    .filter(|&i| ids[i] == id)
+                    .map(|i| done.cloud.positions[i]),
+            );
+            let f1 = compare_clouds(&street, &alone.positions, &[0.01 * length]).fscores[0].f1;
+            let shared = o.indices.iter().filter(|&&i| labels[i] == truth.id).count();
+            let fit = report
+                .plane
+                .map_or("none".to_string(), |p| format!("{:?}", p.fit));
+            let vouched = report
+                .plane
+                .map_or(String::new(), |p| p.vouched.to_string());
+            Some(format!(
+                "{seed},{},{},{length:.2},{:?},{fit},{vouched},{},{},{f1:.4},{},{},{shared}",
+                report.id,
+                truth.category.map_or("?", |c| c.name()),
+                o.guess(),
+                off.map_or(String::new(), |d| format!("{d:.4}")),
+                off.map_or(String::new(), |d| format!("{:.5}", d / length)),
+                o.indices.len(),
+                own.len(),
+            ))
+        })
+        .collect()
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut params = StreetParams::default();
@@ -94,6 +171,8 @@ fn main() {
     let mut reals: Vec<(String, PointCloud)> = Vec::new();
     let mut real_seeds: Vec<u64> = vec![201];
     let mut complete = false;
+    let mut narrowest = Narrowest::default();
+    let mut vehicles_csv: Option<String> = None;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -118,6 +197,18 @@ fn main() {
                 i += 1;
             }
             "--complete" => complete = true,
+            "--no-width-prior" => {
+                narrowest = Narrowest {
+                    motorcycle: 0.0,
+                    car: 0.0,
+                    van: 0.0,
+                    large: 0.0,
+                }
+            }
+            "--vehicles" => {
+                vehicles_csv = Some(args[i + 1].clone());
+                i += 1;
+            }
             "--length" => {
                 params.length = args[i + 1].parse().expect("--length METRES");
                 i += 1;
@@ -131,6 +222,7 @@ fn main() {
     let (mut total_added, mut total_astray) = (0, 0);
     let completer =
         complete.then(|| Completer::builtin(Device::flex()).expect("the built-in model"));
+    let mut per_vehicle: Vec<String> = Vec::new();
     for seed in seeds {
         let scene = street(seed, &params);
         let labels = scene.labels();
@@ -207,7 +299,7 @@ fn main() {
         let (added, astray) = match &completer {
             Some(completer) => {
                 let settings = street_settings();
-                let done = complete_scene(&scene.cloud, &objects, completer, &settings)
+                let done = complete_scene(&scene.cloud, &objects, completer, &settings, &narrowest)
                     .expect("a generated street has no vehicle attribute");
                 // Vehicle k + 1 is the k-th object taken for one; it is astray when most of
                 // its points are no vehicle's.
@@ -219,6 +311,11 @@ fn main() {
                     .collect();
                 let n = scene.cloud.len();
                 let ids = &done.cloud.attribute(VEHICLE).expect("numbered").values[n..];
+                if vehicles_csv.is_some() {
+                    per_vehicle.extend(vehicle_rows(
+                        seed, &scene, &labels, &objects, &done, completer, &settings, &narrowest,
+                    ));
+                }
                 (
                     ids.len(),
                     ids.iter().filter(|id| astray_ids.contains(id)).count(),
@@ -261,7 +358,8 @@ fn main() {
                 &SceneParams::default(),
             )
             .expect("no attribute needed");
-            let done = complete_scene(&cloud, &objects, completer, &settings).expect("completes");
+            let done = complete_scene(&cloud, &objects, completer, &settings, &narrowest)
+                .expect("completes");
             let first = cloud.len() - car.len();
             // The vehicle holding most of the real car's points, its points and its completion.
             let best = objects
@@ -300,6 +398,16 @@ fn main() {
                 car.len()
             );
         }
+    }
+    if let Some(path) = &vehicles_csv {
+        let mut text = String::from(
+            "seed,vehicle,category,length,guess,fit,vouched,plane_off_m,plane_off_share,f1_street_vs_cut_out,object_points,own_points,shared_points\n",
+        );
+        for row in &per_vehicle {
+            text.push_str(row);
+            text.push('\n');
+        }
+        std::fs::write(path, text).expect("--vehicles FILE is writable");
     }
     println!(
         "all,,{},{},{},{},{total_added},{total_astray},found {:.1} %; completed points astray {:.2} %",

@@ -5,10 +5,9 @@
 use super::{create_dir, PathError, Progress};
 use crate::complete::clean::CleanReport;
 use crate::complete::preview::{render, Layer};
-use crate::complete::symmetry::{Cues, Plane, PlaneFit};
+use crate::complete::symmetry::PlaneReport;
 use crate::complete::{CompleteError, Completer, Completion, Method, Settings, Timings, SYNTHETIC};
 use crate::core::cloud::PointCloud;
-use crate::core::frame::Frame;
 use crate::io::batch::{self, read_list, walk, BatchError, Shard};
 use crate::io::stdio::is_stdio;
 use crate::io::{
@@ -194,39 +193,6 @@ impl FileReport {
     }
 }
 
-/// The symmetry plane: `x = x` in the normalized frame, a point on it and its unit normal in
-/// the input's coordinates, the share of points it mirrors onto others, and how it was placed.
-#[derive(Debug, Serialize)]
-pub struct PlaneReport {
-    pub x: f64,
-    pub point: [f64; 3],
-    pub normal: [f64; 3],
-    pub support: f64,
-    pub fit: PlaneFit,
-    /// Where each cue put the plane, as `x`.
-    pub cues: Cues,
-    /// Whether the cues agree well enough for the mirror image to be drawn.
-    pub vouched: bool,
-}
-
-impl PlaneReport {
-    fn of(plane: &Plane, frame: &Frame) -> PlaneReport {
-        let point = frame.to_input([plane.offset, 0.0, 0.0]);
-        let ahead = frame.to_input([plane.offset + 1.0, 0.0, 0.0]);
-        // One normalized unit is `extent` input units.
-        let normal = [0, 1, 2].map(|i| (ahead[i] - point[i]) / frame.extent);
-        PlaneReport {
-            x: plane.offset,
-            point,
-            normal,
-            support: plane.support,
-            fit: plane.fit,
-            cues: plane.cues,
-            vouched: plane.vouched,
-        }
-    }
-}
-
 #[derive(Debug, Serialize)]
 pub struct OrientationReport {
     pub heading: Option<f64>,
@@ -313,7 +279,7 @@ pub fn complete_file(
         mirrored: done.mirrored,
         filtered_out: done.filtered_out,
         network_passes: done.network_passes,
-        symmetry_plane: done.plane.map(|p| PlaneReport::of(&p, &done.frame)),
+        symmetry_plane: done.plane.map(|p| p.report(&done.frame)),
         orientation: OrientationReport {
             heading: run.orientation.heading,
             method: run.orientation.method,
@@ -354,7 +320,14 @@ fn complete_scene_file(
     let start = Instant::now();
     let objects =
         find_objects(&cloud, settings.options.up, &scene.selection, &scene.params).map_err(fail)?;
-    let done = complete_scene(&cloud, &objects, job.completer, settings).map_err(fail)?;
+    let done = complete_scene(
+        &cloud,
+        &objects,
+        job.completer,
+        settings,
+        &scene.params.narrowest,
+    )
+    .map_err(fail)?;
     let mut warnings: Vec<String> = non_finite_warning(non_finite_dropped).into_iter().collect();
     if let Selection::Classes(codes) = &scene.selection {
         let classes = cloud.attribute(CLASSIFICATION).map(|a| &a.values);

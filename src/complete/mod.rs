@@ -23,7 +23,7 @@ use crate::complete::clean::{clean, CleanParams, CleanReport};
 use crate::complete::filter::SorParams;
 use crate::complete::network::{run_network, NetworkOutput};
 use crate::complete::orient::{orient, OrientMode, OrientParams, Orientation, Orienter};
-use crate::complete::symmetry::{find_plane, find_roll, mirror, Plane, SymmetryParams};
+use crate::complete::symmetry::{find_plane, find_roll, mirror, Plane, SymmetryParams, Width};
 use crate::core::camera::CameraError;
 use crate::core::cloud::{Aabb, Attribute, PointCloud, ScalarKind};
 use crate::core::frame::{Frame, FrameError, UpAxis};
@@ -162,6 +162,10 @@ pub struct Options {
     /// The vehicle's width in the input's units, when the user knows it: the plane of a scan
     /// of one side is then kept at least half of it from the scanned flank (see [`find_plane`]).
     pub vehicle_width: Option<f64>,
+    /// The narrowest the vehicle can be, in the input's units (`complete --scene` knows it from
+    /// the vehicle's size in metres): the plane of a scan of one side is kept at least half of
+    /// it from the scanned flank, whatever the plane found. `vehicle_width` overrides it.
+    pub min_vehicle_width: Option<f64>,
     /// The heuristics' tunables.
     pub tuning: Tuning,
 }
@@ -213,6 +217,7 @@ impl Default for Options {
             symmetric_frame: true,
             keep_views: false,
             vehicle_width: None,
+            min_vehicle_width: None,
             tuning: Tuning::default(),
         }
     }
@@ -798,7 +803,11 @@ fn framed(input: &PointCloud, options: &Options) -> Result<Framed, CompleteError
     let wants_plane = options.symmetric_frame
         || options.method == Method::Mirror
         || (options.method == Method::Network && options.symmetry);
-    let width = options.vehicle_width.map(|w| w / fitted.extent);
+    let width = match (options.vehicle_width, options.min_vehicle_width) {
+        (Some(w), _) => Some(Width::Known(w / fitted.extent)),
+        (None, Some(w)) => Some(Width::AtLeast(w / fitted.extent)),
+        (None, None) => None,
+    };
     let plane = wants_plane
         .then(|| find_plane(&fitted_points, width, &options.tuning.symmetry))
         .flatten();

@@ -8,6 +8,7 @@
 
 use crate::complete::upright::{at_height, GROUND};
 use crate::core::cloud::Aabb;
+use crate::core::frame::Frame;
 use crate::core::knn::{KnnIndex, MatchGrid};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
@@ -171,6 +172,49 @@ pub struct Plane {
     pub both_sides: bool,
 }
 
+impl Plane {
+    /// The plane as reports give it, `frame` being the one it was found in.
+    pub fn report(&self, frame: &Frame) -> PlaneReport {
+        let point = frame.to_input([self.offset, 0.0, 0.0]);
+        let ahead = frame.to_input([self.offset + 1.0, 0.0, 0.0]);
+        // One normalized unit is `extent` input units.
+        let normal = [0, 1, 2].map(|i| (ahead[i] - point[i]) / frame.extent);
+        PlaneReport {
+            x: self.offset,
+            point,
+            normal,
+            support: self.support,
+            fit: self.fit,
+            cues: self.cues,
+            vouched: self.vouched,
+        }
+    }
+}
+
+/// The symmetry plane: `x = x` in the normalized frame, a point on it and its unit normal in
+/// the input's coordinates, the share of points it mirrors onto others, and how it was placed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlaneReport {
+    pub x: f64,
+    pub point: [f64; 3],
+    pub normal: [f64; 3],
+    pub support: f64,
+    pub fit: PlaneFit,
+    /// Where each cue put the plane, as `x`.
+    pub cues: Cues,
+    /// Whether the cues agree well enough for the mirror image to be drawn.
+    pub vouched: bool,
+}
+
+/// What is known of a vehicle's width across its plane, in [`find_plane`]'s units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Width {
+    /// Its width, as the user gives it (`complete --vehicle-width`).
+    Known(f64),
+    /// The narrowest it can be, from its size in a scene in metres (`complete --scene`).
+    AtLeast(f64),
+}
+
 /// Where each cue of [`find_plane`] puts the plane `x = c`, each found on its own; `None` where
 /// a cue has nothing to say.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
@@ -250,7 +294,11 @@ pub enum PlaneFit {
 /// vehicle's `width` (normalized units), a scan of one side has its plane kept at least half of it
 /// from the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show
 /// any symmetry (for example, one flat side) and no width places a plane.
-pub fn find_plane(points: &[[f64; 3]], width: Option<f64>, tune: &SymmetryParams) -> Option<Plane> {
+pub fn find_plane(
+    points: &[[f64; 3]],
+    width: Option<Width>,
+    tune: &SymmetryParams,
+) -> Option<Plane> {
     let bounds = Aabb::of(points)?;
     let across = bounds.max[0] - bounds.min[0];
     let sample = Sample::of(
@@ -286,7 +334,8 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>, tune: &SymmetryParams
     });
     let found = to_the_tyres(points, &bounds, &seen, &sample, found, tune);
     let found = match width {
-        Some(width) => with_width(points, &seen, &sample, width, found, tune),
+        Some(Width::Known(width)) => with_width(points, &seen, &sample, width, found, tune),
+        Some(Width::AtLeast(width)) => at_least(points, &seen, &sample, width, found, tune),
         None => found,
     };
     // A one-sided cloud's slices are already cut; the others' are cut here, once.
@@ -305,7 +354,8 @@ pub fn find_plane(points: &[[f64; 3]], width: Option<f64>, tune: &SymmetryParams
             Some(bounds.center()[0])
         },
         tyres: between_the_tracks(points, &bounds, seen.side, tune).map(|t| t.middle),
-        width: width.and_then(|w| {
+        width: width.and_then(|width| {
+            let (Width::Known(w) | Width::AtLeast(w)) = width;
             let flank = scanned_flank(points, slices, seen.side, tune)?;
             Some(seen.side * (flank - w / 2.0))
         }),
@@ -590,6 +640,32 @@ fn with_width(
         Some(p) if (p.offset - bound) * side <= 0.0 => Some(p),
         Some(p) if flank - p.offset * side < tune.flank_seen * width / 2.0 => Some(p),
         _ => Some(sample.plane(bound, PlaneFit::Width)),
+    }
+}
+
+/// The plane of a scan seen from one side (as for [`with_width`]) of a vehicle at least `width`
+/// wide (normalized units): no nearer the scanned flank than half of it, whatever the plane
+/// found, since a narrowest width is met by every vehicle of its kind; no plane is made where
+/// none was found, since the narrowest width does not place one. `seen` is how the points were
+/// seen, `sample` [`find_plane`]'s.
+fn at_least(
+    points: &[[f64; 3]],
+    seen: &Seen,
+    sample: &Sample,
+    width: f64,
+    plane: Option<Plane>,
+    tune: &SymmetryParams,
+) -> Option<Plane> {
+    let side = seen.side;
+    let flank = seen
+        .one_sided
+        .then(|| scanned_flank(points, &seen.slices, side, tune))
+        .flatten();
+    match (plane, flank) {
+        (Some(p), Some(flank)) if (p.offset - side * (flank - width / 2.0)) * side > 0.0 => {
+            Some(sample.plane(side * (flank - width / 2.0), PlaneFit::Width))
+        }
+        (plane, _) => plane,
     }
 }
 
@@ -1191,6 +1267,11 @@ mod tests {
 
     /// [`with_width`] with the box and the sample [`find_plane`] gives it.
     fn widen(points: &[[f64; 3]], width: f64, plane: Option<Plane>) -> Option<Plane> {
+        bound(points, Width::Known(width), plane)
+    }
+
+    /// `plane` bounded by `width` as [`find_plane`] bounds the plane it found.
+    fn bound(points: &[[f64; 3]], width: Width, plane: Option<Plane>) -> Option<Plane> {
         let bounds = Aabb::of(points).unwrap();
         let across = bounds.max[0] - bounds.min[0];
         let sample = Sample::of(
@@ -1202,14 +1283,41 @@ mod tests {
             &SymmetryParams::default(),
         )
         .unwrap();
-        with_width(
-            points,
-            &Seen::of(points, &bounds, &SymmetryParams::default()),
-            &sample,
-            width,
-            plane,
-            &SymmetryParams::default(),
-        )
+        let seen = Seen::of(points, &bounds, &SymmetryParams::default());
+        let tune = SymmetryParams::default();
+        match width {
+            Width::Known(w) => with_width(points, &seen, &sample, w, plane, &tune),
+            Width::AtLeast(w) => at_least(points, &seen, &sample, w, plane, &tune),
+        }
+    }
+
+    #[test]
+    fn a_narrowest_width_moves_every_plane_nearer_the_scanned_flank_and_places_none() {
+        // As below: a flank at x = 0.2, a roof seen to x = -0.05; the vehicle at least 0.4 wide.
+        let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
+        section.extend((0..=25).map(|i| [-0.05 + i as f64 * 0.01, 0.3]));
+        let points = extruded(&section);
+        let at = |offset: f64| Plane {
+            offset,
+            support: 0.3,
+            tolerance: 0.01,
+            fit: PlaneFit::HeldBack,
+            cues: Cues::default(),
+            vouched: true,
+            both_sides: false,
+        };
+        let least = Width::AtLeast(0.4);
+        // 0.14 from the flank, 0.7 of the half-width: a known width leaves it (its widest part
+        // may be unseen), the narrowest every such vehicle reaches does not.
+        assert_eq!(widen(&points, 0.4, Some(at(0.06))), Some(at(0.06)));
+        let moved = bound(&points, least, Some(at(0.06))).unwrap();
+        assert!(moved.offset.abs() < 1e-12, "{moved:?}");
+        assert_eq!(moved.fit, PlaneFit::Width);
+        assert_eq!(bound(&points, least, Some(at(-0.01))), Some(at(-0.01)));
+        assert_eq!(bound(&points, least, None), None);
+        let flipped: Vec<[f64; 3]> = points.iter().map(|&p| mirror(p, 0.0)).collect();
+        let moved = bound(&flipped, least, Some(at(-0.06))).unwrap();
+        assert!(moved.offset.abs() < 1e-12, "{moved:?}");
     }
 
     #[test]

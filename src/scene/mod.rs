@@ -13,6 +13,7 @@ pub mod ground;
 pub mod preview;
 pub mod score;
 
+use crate::complete::symmetry::PlaneReport;
 use crate::complete::{CompleteError, Completer, Settings};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind, SYNTHETIC};
 use crate::core::frame::UpAxis;
@@ -82,6 +83,50 @@ pub struct SceneParams {
     /// closer to how it does alone: lab/2026-12-07-scene-detection).
     pub lift: f64,
     pub sizes: VehicleSizes,
+    pub narrowest: Narrowest,
+}
+
+/// The narrowest road vehicle of each [`Guess`] without its mirrors, metres. A scene is in
+/// metres, so each vehicle's symmetry plane is told the least its width can be: a one-sided
+/// scan's plane is then kept at least half of it from the outermost point of the scanned flank,
+/// where the scan alone of a vehicle taller than the scanner puts it far too near
+/// (docs/scenes.md, *Metres*). A value of 0 leaves the plane to the scan alone.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Narrowest {
+    /// A motorcycle's body with its footrests is 0.4–0.6 m across; its handlebar (0.65–0.9 m)
+    /// may be the part a one-sided scan misses.
+    pub motorcycle: f64,
+    /// Japanese kei cars are at most 1.48 m wide, a Smart Fortwo 1.56 m.
+    pub car: f64,
+    /// Small vans (Caddy, Berlingo) are 1.79–1.85 m wide, a large car 1.9 m.
+    pub van: f64,
+    /// Buses and lorries are 2.55 m wide in the EU, light trucks and narrow trams about 2.2 m.
+    pub large: f64,
+}
+
+impl Default for Narrowest {
+    fn default() -> Self {
+        Narrowest {
+            motorcycle: 0.4,
+            car: 1.45,
+            van: 1.7,
+            large: 2.2,
+        }
+    }
+}
+
+impl Narrowest {
+    /// The width given to the plane of a vehicle guessed `guess`; none where it is 0.
+    pub fn of(&self, guess: Guess) -> Option<f64> {
+        let width = match guess {
+            Guess::Motorcycle => self.motorcycle,
+            Guess::Car => self.car,
+            Guess::Van => self.van,
+            Guess::Large => self.large,
+        };
+        (width > 0.0).then_some(width)
+    }
 }
 
 impl Default for SceneParams {
@@ -93,6 +138,7 @@ impl Default for SceneParams {
             max_height: 4.6,
             lift: 0.02,
             sizes: VehicleSizes::default(),
+            narrowest: Narrowest::default(),
         }
     }
 }
@@ -494,8 +540,9 @@ pub struct VehicleReport {
     pub mirrored: usize,
     /// The heading the pipeline found, degrees, in the vehicle's own normalized frame.
     pub heading: Option<f64>,
-    /// Whether the symmetry plane's cues agreed (none: no plane).
-    pub plane_vouched: Option<bool>,
+    /// The symmetry plane in the scene's coordinates (none: no plane), with whether its cues
+    /// agreed.
+    pub plane: Option<PlaneReport>,
     pub warnings: Vec<String>,
     /// Why it was left as scanned, when its completion failed.
     pub failed: Option<String>,
@@ -511,13 +558,15 @@ pub struct SceneCompletion {
 }
 
 /// Completes each vehicle of `objects` in `cloud` with `completer` (`settings` as for one
-/// cut-out vehicle) and appends what each one gains. A vehicle whose completion fails is left as
-/// scanned and reported so; the scene is never lost for it.
+/// cut-out vehicle, each given the `narrowest` width of its guess as the least it can be)
+/// and appends what each one gains. A vehicle whose completion fails is left as scanned and
+/// reported so; the scene is never lost for it.
 pub fn complete_scene(
     cloud: &PointCloud,
     objects: &Objects,
     completer: &Completer,
     settings: &Settings,
+    narrowest: &Narrowest,
 ) -> Result<SceneCompletion, SceneError> {
     if cloud.attribute(VEHICLE).is_some() {
         return Err(SceneError::AlreadyCompleted);
@@ -532,7 +581,11 @@ pub fn complete_scene(
     }
     let runs: Vec<Result<crate::complete::Run, CompleteError>> = vehicles
         .par_iter()
-        .map(|v| completer.run(&cloud.select(&v.indices), settings))
+        .map(|v| {
+            let mut settings = settings.clone();
+            settings.options.min_vehicle_width = narrowest.of(v.guess());
+            completer.run(&cloud.select(&v.indices), &settings)
+        })
         .collect();
     let mut out = cloud.clone();
     if out.attribute(SYNTHETIC).is_none() {
@@ -552,7 +605,7 @@ pub fn complete_scene(
             added: 0,
             mirrored: 0,
             heading: None,
-            plane_vouched: None,
+            plane: None,
             warnings: Vec::new(),
             failed: None,
         };
@@ -567,7 +620,7 @@ pub fn complete_scene(
                 report.added = added.len();
                 report.mirrored = done.mirrored;
                 report.heading = run.orientation.heading;
-                report.plane_vouched = done.plane.map(|p| p.vouched);
+                report.plane = done.plane.map(|p| p.report(&done.frame));
                 report.warnings = done.warnings;
                 append(&mut out, &added, id);
             }
@@ -752,7 +805,14 @@ mod tests {
                 ..Default::default()
             },
         };
-        let done = complete_scene(&cloud, &found, &Completer::new(None, None), &settings).unwrap();
+        let done = complete_scene(
+            &cloud,
+            &found,
+            &Completer::new(None, None),
+            &settings,
+            &Narrowest::default(),
+        )
+        .unwrap();
         assert_eq!(done.vehicles.len(), 1);
         let failed = done.vehicles[0].failed.as_deref().unwrap();
         assert!(failed.contains("model"), "{failed}");

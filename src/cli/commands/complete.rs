@@ -200,6 +200,8 @@ fn options(args: &CompleteArgs, input: &Path, tuning: Tuning) -> Options {
         symmetric_frame: true,
         keep_views: args.save_views.is_some(),
         vehicle_width: args.vehicle_width,
+        // Known only in a scene, from each vehicle's size in metres (`--scene`).
+        min_vehicle_width: None,
         tuning,
     }
 }

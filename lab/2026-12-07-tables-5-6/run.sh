@@ -3,7 +3,8 @@
 # at a scale two CPU cores allow: every row the same recipe, data, seed and steps, trained from
 # scratch. Resumable: a row with a line in results.csv is skipped, a row with checkpoints goes on
 # from its latest (`train --resume`), so the script can be stopped and run again at any time.
-# Usage: run.sh MVPCC OUT [STEPS]   (RAYON_NUM_THREADS and nice are the caller's)
+# Usage: run.sh MVPCC OUT [STEPS]   (RAYON_NUM_THREADS and nice are the caller's; ROWS="views-5
+# views-6" runs only the rows named, so that two runs on disjoint rows can share the data)
 set -euo pipefail
 m=${1:?MVPCC} out=${2:?OUT} steps=${3:-1000}
 mkdir -p "$out"
@@ -21,6 +22,7 @@ fi
 
 row() { # name, cameras, fusion, channels
   local name=$1 cameras=$2 fusion=$3 channels=$4 run=$out/$1
+  [ -n "${ROWS:-}" ] && [[ " $ROWS " != *" $name "* ]] && return
   grep -q "^$name," "$results" && return
   local views; views=$(tr ',' '\n' <<< "$cameras" | wc -l)
   if [ -d "$run/checkpoints" ] && [ -n "$(ls "$run/checkpoints")" ]; then

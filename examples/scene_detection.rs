@@ -14,7 +14,8 @@
 //! its symmetry plane lies from the true centre line, and the F1 at 1 % of its length between
 //! its completion in the street and the completion of its own points alone, cut out by their
 //! labels; `--no-width-prior`: each plane from its scan alone, as for a cut-out vehicle in
-//! unknown units)
+//! unknown units; `--dump DIR`: with `--vehicles`, each found vehicle's points as cut from
+//! the street and as labelled, `SEED-ID-street.ply` and `SEED-ID-alone.ply`, for a closer look)
 //!
 //! Seeds 1–20 are for choices; the report's figures are measured once on seeds 101–110.
 
@@ -25,7 +26,7 @@ use mvpcc::core::cloud::PointCloud;
 use mvpcc::core::frame::UpAxis;
 use mvpcc::datagen::synth::street::{street, Kind, StreetParams};
 use mvpcc::datagen::synth::Category;
-use mvpcc::io::read_cloud;
+use mvpcc::io::{read_cloud, write_cloud, Encoding};
 use mvpcc::metrics::compare_clouds;
 use mvpcc::scene::score::{detection, Detection};
 use mvpcc::scene::{complete_scene, find_objects, Narrowest, SceneParams, Selection, VEHICLE};
@@ -103,6 +104,7 @@ fn vehicle_rows(
     completer: &Completer,
     settings: &Settings,
     narrowest: &Narrowest,
+    dump: Option<&std::path::Path>,
 ) -> Vec<String> {
     let ids = &done.cloud.attribute(VEHICLE).expect("numbered").values;
     let n = scene.cloud.len();
@@ -123,6 +125,13 @@ fn vehicle_rows(
                 d.abs()
             });
             let own: Vec<usize> = (0..n).filter(|&i| labels[i] == truth.id).collect();
+            if let Some(dir) = dump {
+                for (what, indices) in [("street", &o.indices), ("alone", &own)] {
+                    let path = dir.join(format!("{seed}-{}-{what}.ply", report.id));
+                    let cloud = scene.cloud.select(indices);
+                    write_cloud(&path, &cloud, None, Encoding::Binary).expect("--dump DIR");
+                }
+            }
             let mut alone_settings = settings.clone();
             alone_settings.options.min_vehicle_width = narrowest.of(o.guess());
             let alone = completer
@@ -173,6 +182,7 @@ fn main() {
     let mut complete = false;
     let mut narrowest = Narrowest::default();
     let mut vehicles_csv: Option<String> = None;
+    let mut dump: Option<std::path::PathBuf> = None;
     let mut i = 0;
     while i < args.len() {
         match args[i].as_str() {
@@ -204,6 +214,10 @@ fn main() {
                     van: 0.0,
                     large: 0.0,
                 }
+            }
+            "--dump" => {
+                dump = Some(args[i + 1].clone().into());
+                i += 1;
             }
             "--vehicles" => {
                 vehicles_csv = Some(args[i + 1].clone());
@@ -313,7 +327,15 @@ fn main() {
                 let ids = &done.cloud.attribute(VEHICLE).expect("numbered").values[n..];
                 if vehicles_csv.is_some() {
                     per_vehicle.extend(vehicle_rows(
-                        seed, &scene, &labels, &objects, &done, completer, &settings, &narrowest,
+                        seed,
+                        &scene,
+                        &labels,
+                        &objects,
+                        &done,
+                        completer,
+                        &settings,
+                        &narrowest,
+                        dump.as_deref(),
                     ));
                 }
                 (

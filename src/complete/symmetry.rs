@@ -291,9 +291,11 @@ pub enum PlaneFit {
 ///
 /// On the validation split (lab/2026-12-01-plane-pairs-slices) the pairs took the mirror's F1@0.01
 /// from 0.673 to 0.699, most of it on the 27 % of partials that had no plane before. Given the
-/// vehicle's `width` (normalized units), a scan of one side has its plane kept at least half of it
-/// from the scanned flank (`with_width`). `None` only when neither support, pairs nor tyres show
-/// any symmetry (for example, one flat side) and no width places a plane.
+/// vehicle's known `width` ([`Width::Known`], normalized units), a scan of one side has its
+/// plane kept at least half of it from the scanned flank (`with_width`); given the narrowest it
+/// can be ([`Width::AtLeast`]), every plane is (`at_least`). `None` only when neither support,
+/// pairs nor tyres show any symmetry (for example, one flat side) and no known width places a
+/// plane.
 pub fn find_plane(
     points: &[[f64; 3]],
     width: Option<Width>,
@@ -657,13 +659,14 @@ fn at_least(
     tune: &SymmetryParams,
 ) -> Option<Plane> {
     let side = seen.side;
-    let flank = seen
+    let bound = seen
         .one_sided
         .then(|| scanned_flank(points, &seen.slices, side, tune))
-        .flatten();
-    match (plane, flank) {
-        (Some(p), Some(flank)) if (p.offset - side * (flank - width / 2.0)) * side > 0.0 => {
-            Some(sample.plane(side * (flank - width / 2.0), PlaneFit::Width))
+        .flatten()
+        .map(|flank| side * (flank - width / 2.0));
+    match (plane, bound) {
+        (Some(p), Some(bound)) if (p.offset - bound) * side > 0.0 => {
+            Some(sample.plane(bound, PlaneFit::Width))
         }
         (plane, _) => plane,
     }

@@ -263,24 +263,27 @@ fn a_completed_scene_is_not_completed_again() {
     assert!(!twice.exists());
 }
 
+/// A 30 m street of `synth --scene --seed SEED` in `dir`: its LAS file and its truth.
+fn generated_street(dir: &TempDir, seed: u64) -> (PathBuf, serde_json::Value) {
+    let out = dir.path().join("streets");
+    mvpcc()
+        .args(["synth", "--scene", "--count", "1", "--length", "30"])
+        .args(["--seed", &seed.to_string(), "--out", s(&out)])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains("wrote 1 street of 30 m"));
+    let truth =
+        serde_json::from_slice(&std::fs::read(out.join("street_00000.json")).unwrap()).unwrap();
+    (out.join("street_00000.las"), truth)
+}
+
 /// `synth --scene` writes a classified street with each point's object and the objects' truth,
 /// which `complete --scene --vehicle-class 64` completes vehicle by vehicle.
 #[test]
 fn a_generated_street_carries_its_truth_and_completes() {
     let dir = TempDir::new().unwrap();
-    let out = dir.path().join("streets");
-    mvpcc()
-        .args([
-            "synth", "--scene", "--count", "1", "--length", "30", "--seed", "3",
-        ])
-        .args(["--out", s(&out)])
-        .assert()
-        .success()
-        .stderr(predicate::str::contains("wrote 1 street of 30 m"));
-    let las = out.join("street_00000.las");
+    let (las, truth) = generated_street(&dir, 3);
     let street = read(&las);
-    let truth: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("street_00000.json")).unwrap()).unwrap();
     let objects = truth["objects"].as_array().unwrap();
     let ids = &street.attribute("object").unwrap().values;
     let classes = &street.attribute("classification").unwrap().values;
@@ -434,18 +437,11 @@ fn points_flagged_synthetic_in_the_input_are_not_appended_again() {
 #[test]
 fn a_large_vehicles_plane_in_a_street_is_kept_off_its_scanned_flank() {
     let dir = TempDir::new().unwrap();
-    let out = dir.path().join("streets");
-    mvpcc()
-        .args(["synth", "--scene", "--count", "1", "--length", "30"])
-        .args(["--seed", "2", "--out", s(&out)])
-        .assert()
-        .success();
-    let truth: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("street_00000.json")).unwrap()).unwrap();
+    let (las, truth) = generated_street(&dir, 2);
     let run = mvpcc()
         .args(["complete", "--scene", "--vehicle-class", "64"])
         .args(["--method", "mirror", "--json"])
-        .arg(out.join("street_00000.las"))
+        .arg(&las)
         .arg(dir.path().join("done.las"))
         .output()
         .unwrap();

@@ -1294,13 +1294,17 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_narrowest_width_moves_every_plane_nearer_the_scanned_flank_and_places_none() {
-        // As below: a flank at x = 0.2, a roof seen to x = -0.05; the vehicle at least 0.4 wide.
+    /// A near flank at x = 0.2 and a roof seen only to x = -0.05 (a tall vehicle driven past):
+    /// a vehicle 0.4 wide has its plane at x = 0.
+    fn tall_flank() -> Vec<[f64; 3]> {
         let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
         section.extend((0..=25).map(|i| [-0.05 + i as f64 * 0.01, 0.3]));
-        let points = extruded(&section);
-        let at = |offset: f64| Plane {
+        extruded(&section)
+    }
+
+    /// A plane held back at `offset`, as [`find_plane`] may have found it before a width.
+    fn held_at(offset: f64) -> Plane {
+        Plane {
             offset,
             support: 0.3,
             tolerance: 0.01,
@@ -1308,40 +1312,38 @@ mod tests {
             cues: Cues::default(),
             vouched: true,
             both_sides: false,
-        };
+        }
+    }
+
+    #[test]
+    fn a_narrowest_width_moves_every_plane_nearer_the_scanned_flank_and_places_none() {
+        let points = tall_flank();
         let least = Width::AtLeast(0.4);
         // 0.14 from the flank, 0.7 of the half-width: a known width leaves it (its widest part
         // may be unseen), the narrowest every such vehicle reaches does not.
-        assert_eq!(widen(&points, 0.4, Some(at(0.06))), Some(at(0.06)));
-        let moved = bound(&points, least, Some(at(0.06))).unwrap();
+        assert_eq!(
+            widen(&points, 0.4, Some(held_at(0.06))),
+            Some(held_at(0.06))
+        );
+        let moved = bound(&points, least, Some(held_at(0.06))).unwrap();
         assert!(moved.offset.abs() < 1e-12, "{moved:?}");
         assert_eq!(moved.fit, PlaneFit::Width);
-        assert_eq!(bound(&points, least, Some(at(-0.01))), Some(at(-0.01)));
+        assert_eq!(
+            bound(&points, least, Some(held_at(-0.01))),
+            Some(held_at(-0.01))
+        );
         assert_eq!(bound(&points, least, None), None);
         let flipped: Vec<[f64; 3]> = points.iter().map(|&p| mirror(p, 0.0)).collect();
-        let moved = bound(&flipped, least, Some(at(-0.06))).unwrap();
+        let moved = bound(&flipped, least, Some(held_at(-0.06))).unwrap();
         assert!(moved.offset.abs() < 1e-12, "{moved:?}");
     }
 
     #[test]
     fn a_known_width_keeps_the_plane_half_of_it_from_the_scanned_flank() {
-        // A near flank at x = 0.2 and a roof seen only to x = -0.05 (a tall vehicle driven
-        // past): a vehicle 0.4 wide has its plane at x = 0. A point alone in its slice beyond
-        // the flank (a stray return) does not move the flank.
-        let mut section: Vec<[f64; 2]> = (0..100).map(|i| [0.2, i as f64 * 0.002]).collect();
-        section.extend((0..=25).map(|i| [-0.05 + i as f64 * 0.01, 0.3]));
-        let mut points = extruded(&section);
+        // A point alone in its slice beyond the flank (a stray return) does not move the flank.
+        let mut points = tall_flank();
         points.push([0.23, 0.25, 0.2]);
-        let at = |offset: f64| Plane {
-            offset,
-            support: 0.3,
-            tolerance: 0.01,
-            fit: PlaneFit::HeldBack,
-            cues: Cues::default(),
-            vouched: true,
-            both_sides: false,
-        };
-        let widened = widen(&points, 0.4, Some(at(0.03))).unwrap();
+        let widened = widen(&points, 0.4, Some(held_at(0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
         assert_eq!(widened.fit, PlaneFit::Width);
         assert!(
@@ -1349,13 +1351,13 @@ mod tests {
             "{widened:?}"
         );
         assert_eq!(
-            widen(&points, 0.4, Some(at(0.06))),
-            Some(at(0.06)),
+            widen(&points, 0.4, Some(held_at(0.06))),
+            Some(held_at(0.06)),
             "the flank 0.7 of the half-width from the plane: its widest part not seen, kept"
         );
         assert_eq!(
-            widen(&points, 0.4, Some(at(-0.01))),
-            Some(at(-0.01)),
+            widen(&points, 0.4, Some(held_at(-0.01))),
+            Some(held_at(-0.01)),
             "farther from the flank than half the width: kept"
         );
         let placed = widen(&points, 0.4, None).unwrap();
@@ -1363,12 +1365,12 @@ mod tests {
 
         // Scanned from the other side.
         let flipped: Vec<[f64; 3]> = points.iter().map(|&p| mirror(p, 0.0)).collect();
-        let widened = widen(&flipped, 0.4, Some(at(-0.03))).unwrap();
+        let widened = widen(&flipped, 0.4, Some(held_at(-0.03))).unwrap();
         assert!(widened.offset.abs() < 1e-12, "{widened:?}");
 
         // Seen from both sides, the points say where the plane is.
         let both: Vec<[f64; 3]> = points.iter().chain(&flipped).copied().collect();
-        assert_eq!(widen(&both, 0.6, Some(at(0.01))), Some(at(0.01)));
+        assert_eq!(widen(&both, 0.6, Some(held_at(0.01))), Some(held_at(0.01)));
         assert_eq!(widen(&both, 0.6, None), None);
     }
 

@@ -468,3 +468,113 @@ fn a_large_vehicles_plane_in_a_street_is_kept_off_its_scanned_flank() {
     }
     assert_eq!(buses, 2);
 }
+
+/// Runs `complete --scene INPUT OUTPUT ARGS --json`, which must succeed: its report.
+fn completed_scene(input: &Path, output: &Path, args: &[&str]) -> serde_json::Value {
+    let run = mvpcc()
+        .args(["complete", "--scene", s(input), s(output), "--json"])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    report(&run)
+}
+
+/// A tile streamed in chunks (`--stream-from 0`) of 24 m, so that the second car (22.8–27.2 m)
+/// crosses a border: every input point comes back to the bit, and each car is found and
+/// completed once, as when the tile is read whole. LAZ in and out.
+#[test]
+fn a_tile_streamed_in_chunks_completes_each_vehicle_once_as_read_whole() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "street.laz", &street(true));
+    let (whole, streamed) = (
+        dir.path().join("whole.laz"),
+        dir.path().join("streamed.laz"),
+    );
+    let preview = dir.path().join("streamed.png");
+    let read_whole = completed_scene(&input, &whole, &[]);
+    let chunked = completed_scene(
+        &input,
+        &streamed,
+        &[
+            "--stream-from",
+            "0",
+            "--chunk",
+            "24",
+            "--preview",
+            s(&preview),
+        ],
+    );
+    let image = image::open(&preview).unwrap().to_rgb8();
+    let red = image.pixels().filter(|p| p.0 == [230, 60, 30]).count();
+    assert!(red > 1000, "the completed points are drawn: {red} pixels");
+    assert_eq!(chunked["scene"]["chunks"], 2, "{chunked}");
+    assert!(read_whole["scene"].get("chunks").is_none());
+    let (scanned, done) = (read(&input), read(&streamed));
+    unchanged_then_appended(&scanned, &done);
+    let n = scanned.len();
+    let ids = &done.attribute("vehicle").unwrap().values;
+    assert!(ids[..n].iter().all(|&v| v == 0.0));
+    let mut appended: Vec<f64> = ids[n..].to_vec();
+    appended.dedup();
+    assert_eq!(
+        appended,
+        [1.0, 2.0],
+        "each car completed once, its points together"
+    );
+    let flags = &done.attribute(SYNTHETIC).unwrap().values;
+    assert!(flags[n..].iter().all(|&f| f == 1.0) && flags[..n].iter().all(|&f| f == 0.0));
+    let vehicles = |r: &serde_json::Value| {
+        let mut v: Vec<(i64, i64, u64)> = r["scene"]["vehicles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| {
+                let c = &v["footprint"]["centre"];
+                let cm = |k: usize| (c[k].as_f64().unwrap() * 100.0).round() as i64;
+                (cm(0), cm(1), v["points"].as_u64().unwrap())
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(vehicles(&chunked), vehicles(&read_whole));
+    assert_eq!(
+        chunked["scene"]["rejected"],
+        read_whole["scene"]["rejected"]
+    );
+    assert_eq!(
+        chunked["scene"]["ground_points"],
+        read_whole["scene"]["ground_points"]
+    );
+    // The same points completed alike: the appended counts within a few per cent.
+    let added = |r: &serde_json::Value| r["added"].as_f64().unwrap();
+    let (a, b) = (added(&chunked), added(&read_whole));
+    assert!((a - b).abs() <= 0.05 * b, "{a} streamed, {b} read whole");
+    assert_eq!(done.len(), n + a as usize);
+}
+
+/// Streamed as read whole: a tile without vehicles comes back as it was, and a class no point
+/// has is said.
+#[test]
+fn a_streamed_tile_without_vehicles_comes_back_unchanged() {
+    let dir = TempDir::new().unwrap();
+    let input = write(&dir, "empty.las", &street(false));
+    let output = dir.path().join("done.las");
+    mvpcc()
+        .args(["complete", "--scene", s(&input), s(&output)])
+        .args(["--stream-from", "0", "--vehicle-class", "10,64"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "--vehicle-class 64: no point has this class",
+        ))
+        .stderr(predicate::str::contains(
+            "no vehicle found among 0 objects; the scan is written unchanged",
+        ));
+    assert_eq!(read(&output), read(&input));
+}

@@ -15,6 +15,7 @@ use crate::io::{
     CloudIoError, Encoding, Format, Problem,
 };
 use crate::scene::preview::plan_view;
+use crate::scene::stream::{complete_tile, tile_header, StreamError, StreamParams, TileJob};
 use crate::scene::{
     complete_scene, find_objects, SceneError, SceneParams, Selection, VehicleReport, Verdict,
     CLASSIFICATION,
@@ -62,6 +63,8 @@ pub enum FileError {
     ViewsIsOutput(PathBuf),
     #[error("{}: {source}", path.display())]
     Scene { path: PathBuf, source: SceneError },
+    #[error(transparent)]
+    Tile(#[from] StreamError),
 }
 
 #[derive(Debug, Error)]
@@ -117,6 +120,7 @@ pub struct Job<'a> {
 pub struct SceneJob {
     pub selection: Selection,
     pub params: SceneParams,
+    pub stream: StreamParams,
 }
 
 /// What `complete --scene` reports of one scan besides [`FileReport`]'s totals.
@@ -128,6 +132,12 @@ pub struct SceneReport {
     pub vehicles: Vec<VehicleReport>,
     /// Objects that are no vehicle, by why.
     pub rejected: BTreeMap<String, usize>,
+    /// Chunks a tile too large to hold was streamed in (`StreamParams::from_points`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chunks: Option<usize>,
+    /// Points of the largest chunk with its margins, which bounds the memory.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub largest_chunk: Option<usize>,
 }
 
 /// What `complete --json` reports for one file.
@@ -163,14 +173,18 @@ impl FileReport {
         if let Some(scene) = &self.scene {
             let completed = scene.vehicles.iter().filter(|v| v.failed.is_none()).count();
             return format!(
-                "{}: {} points → {} ({} completed for {} of {}) in {:.2} s",
+                "{}: {} points → {} ({} completed for {} of {}{}) in {:.2} s",
                 self.output.display(),
                 self.input_points,
                 self.output_points,
                 self.added,
                 count(completed, "vehicle"),
                 count(scene.objects, "object"),
-                self.seconds.values().sum::<f64>()
+                scene.chunks.map_or(String::new(), |n| format!(
+                    "; streamed in {}",
+                    count(n, "chunk")
+                )),
+                self.seconds.get("total").copied().unwrap_or_default()
             );
         }
         format!(
@@ -229,6 +243,12 @@ pub fn complete_file(
     let opts = &job.files;
     check_paths(input, output, views, opts)?;
     let format = output_format(opts, input, output)?;
+    if let Some(scene) = &job.scene {
+        if let Some(compressed) = streamed(input, output, format, opts, scene)? {
+            let settings = (job.settings)(input);
+            return complete_tile_file(input, output, compressed, scene, &settings, job);
+        }
+    }
     let start = Instant::now();
     let loaded = read_cloud(input, opts.input_format)?;
     let cloud = loaded.cloud;
@@ -329,53 +349,180 @@ fn complete_scene_file(
     )
     .map_err(fail)?;
     let mut warnings: Vec<String> = non_finite_warning(non_finite_dropped).into_iter().collect();
-    if let Selection::Classes(codes) = &scene.selection {
-        let classes = cloud.attribute(CLASSIFICATION).map(|a| &a.values);
-        for code in codes {
-            if !classes.is_some_and(|v| v.iter().any(|&c| c == f64::from(*code))) {
-                warnings.push(format!("--vehicle-class {code}: no point has this class"));
-            }
-        }
-    }
-    if done.vehicles.is_empty() {
-        warnings.push(format!(
-            "no vehicle found among {}; the scan is written unchanged",
-            count(objects.objects.len(), "object")
-        ));
-    }
-    for v in &done.vehicles {
-        match &v.failed {
-            Some(why) => warnings.push(format!("vehicle {} left as scanned: {why}", v.id)),
-            None => warnings.extend(v.warnings.iter().map(|w| format!("vehicle {}: {w}", v.id))),
-        }
-    }
+    let classes = cloud.attribute(CLASSIFICATION).map(|a| &a.values);
+    let used = |code: u8| classes.is_some_and(|v| v.iter().any(|&c| c == f64::from(code)));
+    warnings.extend(scene_warnings(
+        scene,
+        used,
+        objects.objects.len(),
+        &done.vehicles,
+    ));
     warnings.extend(unwritten(&done.cloud, format, output));
     let completing = start.elapsed();
     let start = Instant::now();
     write_cloud(output, &done.cloud, Some(format), job.files.encoding)?;
     if let Some(path) = &job.files.preview {
-        let image = plan_view(&done.cloud, cloud.len(), settings.options.up);
-        let format = preview_format(path)?;
-        atomic_write(path, |w| {
-            image.write_to(w, format).map_err(std::io::Error::other)
-        })
-        .map_err(|source| FileError::Preview {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        write_plan_view(
+            path,
+            &plan_view(&done.cloud, cloud.len(), settings.options.up),
+        )?;
     }
     let timings = Timings {
         read,
         write: start.elapsed(),
         ..Timings::default()
     };
+    let outcome = SceneOutcome {
+        input_points: cloud.len(),
+        output_points: done.cloud.len(),
+        ground_points: objects.ground_points,
+        verdicts: objects.objects.iter().map(|o| o.verdict).collect(),
+        vehicles: done.vehicles,
+        chunks: None,
+    };
+    Ok(scene_file_report(
+        input, output, settings, outcome, warnings, timings, completing,
+    ))
+}
+
+/// Whether `input` is completed as a tile streamed in chunks: a LAS/LAZ file into a LAS/LAZ
+/// file, with at least [`StreamParams::from_points`] points; then whether the output is LAZ.
+fn streamed(
+    input: &Path,
+    output: &Path,
+    format: Format,
+    opts: &FileOptions,
+    scene: &SceneJob,
+) -> Result<Option<bool>, FileError> {
+    let las = |f: Format| matches!(f, Format::Las | Format::Laz);
+    let input_format = Format::of_input(input, opts.input_format).ok();
+    if !las(format) || !input_format.is_some_and(las) || is_stdio(input) || is_stdio(output) {
+        return Ok(None);
+    }
+    let header = tile_header(input)?;
+    Ok((header.points >= scene.stream.from_points).then_some(format == Format::Laz))
+}
+
+/// [`complete_scene_file`] for a tile too large to hold: streamed in chunks
+/// ([`crate::scene::stream`]).
+fn complete_tile_file(
+    input: &Path,
+    output: &Path,
+    compressed: bool,
+    scene: &SceneJob,
+    settings: &Settings,
+    job: &Job,
+) -> Result<FileReport, FileError> {
+    let tile = TileJob {
+        up: settings.options.up,
+        selection: &scene.selection,
+        params: &scene.params,
+        stream: scene.stream,
+        completer: job.completer,
+        settings,
+        preview: job.files.preview.is_some(),
+    };
+    let done = complete_tile(input, output, compressed, &tile)?;
+    let mut warnings = Vec::new();
+    let used = |code: u8| done.classes.contains(&code);
+    warnings.extend(scene_warnings(
+        scene,
+        used,
+        done.verdicts.len(),
+        &done.vehicles,
+    ));
+    if let (Some(path), Some(image)) = (&job.files.preview, &done.preview) {
+        write_plan_view(path, image)?;
+    }
+    let passes = done.passes;
+    let outcome = SceneOutcome {
+        input_points: done.input_points,
+        output_points: done.output_points,
+        ground_points: done.ground_points,
+        verdicts: done.verdicts,
+        vehicles: done.vehicles,
+        chunks: Some((done.chunks, done.largest_chunk)),
+    };
+    Ok(scene_file_report(
+        input,
+        output,
+        settings,
+        outcome,
+        warnings,
+        Timings {
+            read: passes.spill,
+            write: passes.copy,
+            ..Timings::default()
+        },
+        passes.vehicles,
+    ))
+}
+
+/// The warnings of a completed scene: `--vehicle-class` codes no point uses (`used` says
+/// which are), a scene without vehicles, and each vehicle's own.
+fn scene_warnings(
+    scene: &SceneJob,
+    used: impl Fn(u8) -> bool,
+    objects: usize,
+    vehicles: &[VehicleReport],
+) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if let Selection::Classes(codes) = &scene.selection {
+        for &code in codes.iter().filter(|&&c| !used(c)) {
+            warnings.push(format!("--vehicle-class {code}: no point has this class"));
+        }
+    }
+    if vehicles.is_empty() {
+        warnings.push(format!(
+            "no vehicle found among {}; the scan is written unchanged",
+            count(objects, "object")
+        ));
+    }
+    for v in vehicles {
+        match &v.failed {
+            Some(why) => warnings.push(format!("vehicle {} left as scanned: {why}", v.id)),
+            None => warnings.extend(v.warnings.iter().map(|w| format!("vehicle {}: {w}", v.id))),
+        }
+    }
+    warnings
+}
+
+fn write_plan_view(path: &Path, image: &image::RgbImage) -> Result<(), FileError> {
+    let format = preview_format(path)?;
+    atomic_write(path, |w| {
+        image.write_to(w, format).map_err(std::io::Error::other)
+    })
+    .map_err(|source| FileError::Preview {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// What completing a scene came to, in memory or streamed.
+struct SceneOutcome {
+    input_points: usize,
+    output_points: usize,
+    ground_points: usize,
+    /// The size test's verdict on each object, vehicles included.
+    verdicts: Vec<Verdict>,
+    vehicles: Vec<VehicleReport>,
+    /// Chunks the tile was streamed in and the points of the largest with its margins; none
+    /// when it was read whole.
+    chunks: Option<(usize, usize)>,
+}
+
+fn scene_file_report(
+    input: &Path,
+    output: &Path,
+    settings: &Settings,
+    outcome: SceneOutcome,
+    warnings: Vec<String>,
+    timings: Timings,
+    completing: std::time::Duration,
+) -> FileReport {
     let mut rejected = BTreeMap::new();
-    for o in objects
-        .objects
-        .iter()
-        .filter(|o| o.verdict != Verdict::Vehicle)
-    {
-        let why = serde_json::to_value(o.verdict).map_or_else(
+    for verdict in outcome.verdicts.iter().filter(|&&v| v != Verdict::Vehicle) {
+        let why = serde_json::to_value(verdict).map_or_else(
             |_| String::new(),
             |v| v.as_str().unwrap_or_default().to_string(),
         );
@@ -387,14 +534,18 @@ fn complete_scene_file(
         .map(|(name, d)| (name.replace('-', ""), d.as_secs_f64()))
         .collect();
     seconds.insert("vehicles".into(), completing.as_secs_f64());
-    Ok(FileReport {
+    // The stages' total counts reading and writing only; the vehicles' time is apart from it.
+    let total = timings.total() + completing;
+    seconds.insert("total".into(), total.as_secs_f64());
+    let vehicles = outcome.vehicles;
+    FileReport {
         input: input.to_path_buf(),
         output: output.to_path_buf(),
         method: settings.options.method,
-        input_points: cloud.len(),
-        output_points: done.cloud.len(),
-        added: done.vehicles.iter().map(|v| v.added).sum(),
-        mirrored: done.vehicles.iter().map(|v| v.mirrored).sum(),
+        input_points: outcome.input_points,
+        output_points: outcome.output_points,
+        added: vehicles.iter().map(|v| v.added).sum(),
+        mirrored: vehicles.iter().map(|v| v.mirrored).sum(),
         filtered_out: 0,
         network_passes: 0,
         symmetry_plane: None,
@@ -410,12 +561,14 @@ fn complete_scene_file(
         seconds,
         timings,
         scene: Some(SceneReport {
-            ground_points: objects.ground_points,
-            objects: objects.objects.len(),
-            vehicles: done.vehicles,
+            ground_points: outcome.ground_points,
+            objects: outcome.verdicts.len(),
+            vehicles,
             rejected,
+            chunks: outcome.chunks.map(|(n, _)| n),
+            largest_chunk: outcome.chunks.map(|(_, largest)| largest),
         }),
-    })
+    }
 }
 
 /// `n` and the noun, plural unless one.

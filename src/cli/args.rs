@@ -21,6 +21,7 @@ use mvpcc::model::device::{built_backends, DeviceChoice};
 use mvpcc::model::loss::{Adversarial, FeaturePlanes, TvScale};
 use mvpcc::model::weights::{read_config, Network};
 use mvpcc::model::{Channels, Dilation, Formulation, Fusion, Padding};
+use mvpcc::scene::stream::StreamParams;
 use mvpcc::train::loader::{MAX_PREFETCH, MAX_WORKERS};
 use mvpcc::train::orient::OrientSettings;
 use mvpcc::train::TrainSettings;
@@ -361,6 +362,13 @@ pub struct CompleteArgs {
     /// instead of what stands on the ground and has a vehicle's size.
     #[arg(long, value_name = "CODES", value_delimiter = ',', requires = "scene")]
     pub vehicle_class: Option<Vec<u8>>,
+    /// With --scene: a LAS/LAZ tile of at least this many points, written as LAS/LAZ, is
+    /// streamed in chunks (memory bounded by the densest chunk, not the tile; docs/scenes.md).
+    #[arg(long, value_name = "POINTS", requires = "scene", default_value_t = StreamParams::default().from_points)]
+    pub stream_from: usize,
+    /// With --scene, streamed: each chunk's side in metres (each is searched with 25 m around it).
+    #[arg(long, value_name = "METRES", requires = "scene", value_parser = chunk_side, default_value_t = StreamParams::default().chunk)]
+    pub chunk: f64,
     /// A JSON file of the heuristics' tunables to change (`{"orient": {"flank_band": 0.004}}`;
     /// the names and today's values: `mvpcc complete --print-tuning`), for experiments.
     #[arg(long, value_name = "FILE", conflicts_with = "paper")]
@@ -938,6 +946,18 @@ fn positive_length(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(w) if w.is_finite() && w > 0.0 => Ok(w),
         _ => Err(format!("{text} is not a positive length")),
+    }
+}
+
+/// A streamed tile's chunk side: at least 20 m, since each chunk also reads 25 m around it and a
+/// narrower one copies each point into a dozen chunks and more; at most a tile's widest.
+fn chunk_side(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(w) if (20.0..=mvpcc::scene::MAX_SPAN).contains(&w) => Ok(w),
+        _ => Err(format!(
+            "{text} is not a chunk side from 20 to {} metres",
+            mvpcc::scene::MAX_SPAN
+        )),
     }
 }
 

@@ -6,6 +6,7 @@
 
 pub mod batch;
 mod las;
+pub use las::stream;
 mod pcd;
 pub(crate) mod ply;
 pub mod stdio;
@@ -22,7 +23,7 @@ use tempfile::NamedTempFile;
 use thiserror::Error;
 pub use unfinished::remove_unfinished_then;
 pub(crate) use unfinished::track;
-use unfinished::Scratch;
+pub(crate) use unfinished::Scratch;
 
 /// Point cloud file formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -194,7 +195,7 @@ pub(crate) fn check_fields(points: usize, fields: usize) -> Result<(), Problem> 
 }
 
 /// A write error without the temporary file's name, which means nothing to the user.
-fn write_problem(e: std::io::Error) -> Problem {
+pub(crate) fn write_problem(e: std::io::Error) -> Problem {
     Problem::Write(match (e.raw_os_error(), e.get_ref()) {
         (Some(code), _) => std::io::Error::from_raw_os_error(code),
         // tempfile wraps OS errors with its own path; the kind says the same without it.
@@ -547,7 +548,7 @@ where
 
 /// Renames a finished temporary file over `file`, which keeps the permissions it had (a new
 /// file gets those of an ordinary new file).
-fn persist(tmp: Scratch<NamedTempFile>, file: &Path) -> std::io::Result<()> {
+pub(crate) fn persist(tmp: Scratch<NamedTempFile>, file: &Path) -> std::io::Result<()> {
     if let Ok(meta) = std::fs::metadata(file) {
         tmp.as_file().set_permissions(meta.permissions())?;
     }
@@ -579,7 +580,7 @@ fn reader_left(e: &std::io::Error) -> bool {
 /// A temporary file in `path`'s directory (so the final rename stays on one file system),
 /// created with the permissions of an ordinary new file rather than tempfile's private 0600,
 /// and deleted if the process is stopped before it is renamed.
-fn temp_file_beside(path: &Path) -> std::io::Result<Scratch<NamedTempFile>> {
+pub(crate) fn temp_file_beside(path: &Path) -> std::io::Result<Scratch<NamedTempFile>> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -592,6 +593,17 @@ fn temp_file_beside(path: &Path) -> std::io::Result<Scratch<NamedTempFile>> {
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
     Ok(Scratch::new(builder.tempfile_in(dir)?))
+}
+
+/// A scratch folder beside `path` (on the output's file system, which has room for what is
+/// written there), deleted when dropped or when the process is stopped.
+pub(crate) fn scratch_dir_beside(path: &Path) -> std::io::Result<Scratch<tempfile::TempDir>> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let made = tempfile::Builder::new().prefix(".mvpcc-").tempdir_in(dir)?;
+    Ok(Scratch::new(made))
 }
 
 /// True when every coordinate survives a round trip through f32, so writing f32 loses nothing.

@@ -12,9 +12,10 @@ pub mod cluster;
 pub mod ground;
 pub mod preview;
 pub mod score;
+pub mod stream;
 
 use crate::complete::symmetry::PlaneReport;
-use crate::complete::{CompleteError, Completer, Settings};
+use crate::complete::{Completer, Settings};
 use crate::core::cloud::{Attribute, PointCloud, ScalarKind, SYNTHETIC};
 use crate::core::frame::UpAxis;
 use ground::{Ground, GroundParams};
@@ -299,6 +300,29 @@ pub fn find_objects(
     selection: &Selection,
     params: &SceneParams,
 ) -> Result<Objects, SceneError> {
+    find(cloud, up, selection, params, None)
+}
+
+/// [`find_objects`] in one chunk of a tile streamed a chunk at a time ([`stream`]), whose
+/// first `core` points are the chunk's own and the rest its margin: only those count as ground,
+/// and the chunk is never taken for one cut-out vehicle.
+pub(crate) fn find_in_chunk(
+    cloud: &PointCloud,
+    up: UpAxis,
+    selection: &Selection,
+    params: &SceneParams,
+    core: usize,
+) -> Result<Objects, SceneError> {
+    find(cloud, up, selection, params, Some(core))
+}
+
+fn find(
+    cloud: &PointCloud,
+    up: UpAxis,
+    selection: &Selection,
+    params: &SceneParams,
+    core: Option<usize>,
+) -> Result<Objects, SceneError> {
     let origin = cloud.positions.first().copied().unwrap_or_default();
     let split_all: Vec<([f64; 2], f64)> = cloud
         .positions
@@ -308,8 +332,8 @@ pub fn find_objects(
     // A cloud no larger than the largest vehicle is one cut out already: one object, no ground
     // (where the input's classes say which points are vehicles, they decide).
     let whole = match selection {
-        Selection::Detect => cut_out(&split_all, origin, up, params),
-        Selection::Classes(_) => None,
+        Selection::Detect if core.is_none() => cut_out(&split_all, origin, up, params),
+        _ => None,
     };
     if let Some(whole) = whole {
         return Ok(Objects {
@@ -341,7 +365,7 @@ pub fn find_objects(
             for (i, &(p, h)) in split_all.iter().enumerate() {
                 let above = h - ground.height_at(p);
                 if above <= params.ground.height {
-                    on_ground += 1;
+                    on_ground += usize::from(core.is_none_or(|core| i < core));
                     if above >= params.lift {
                         low.push(i);
                     }
@@ -579,14 +603,6 @@ pub fn complete_scene(
             vehicles: Vec::new(),
         });
     }
-    let runs: Vec<Result<crate::complete::Run, CompleteError>> = vehicles
-        .par_iter()
-        .map(|v| {
-            let mut settings = settings.clone();
-            settings.options.min_vehicle_width = narrowest.of(v.guess());
-            completer.run(&cloud.select(&v.indices), &settings)
-        })
-        .collect();
     let mut out = cloud.clone();
     if out.attribute(SYNTHETIC).is_none() {
         out.attributes
@@ -595,36 +611,14 @@ pub fn complete_scene(
     out.attributes
         .push(zeros(VEHICLE, ScalarKind::U16, cloud.len()));
     let mut reports = Vec::new();
-    for (k, (vehicle, run)) in vehicles.iter().zip(runs).enumerate() {
-        let id = k + 1;
-        let mut report = VehicleReport {
-            id,
-            guess: vehicle.guess(),
-            footprint: vehicle.footprint,
-            points: vehicle.indices.len(),
-            added: 0,
-            mirrored: 0,
-            heading: None,
-            plane: None,
-            warnings: Vec::new(),
-            failed: None,
-        };
-        match run {
-            Ok(run) => {
-                let done = run.completion;
-                // The completion holds the vehicle's own points, then the ones it added (a
-                // scene point may carry the synthetic flag already, so the flag cannot tell).
-                let n = done.cloud.len();
-                let added_points: Vec<usize> = (n - done.added..n).collect();
-                let added = done.cloud.select(&added_points);
-                report.added = added.len();
-                report.mirrored = done.mirrored;
-                report.heading = run.orientation.heading;
-                report.plane = done.plane.map(|p| p.report(&done.frame));
-                report.warnings = done.warnings;
-                append(&mut out, &added, id);
-            }
-            Err(e) => report.failed = Some(e.to_string()),
+    for (k, (mut report, added)) in
+        complete_vehicles(cloud, &vehicles, completer, settings, narrowest)
+            .into_iter()
+            .enumerate()
+    {
+        report.id = k + 1;
+        if let Some(added) = added {
+            append(&mut out, &added, report.id);
         }
         reports.push(report);
     }
@@ -632,6 +626,58 @@ pub fn complete_scene(
         cloud: out,
         vehicles: reports,
     })
+}
+
+/// Completes each of `vehicles` (objects of `cloud`) in parallel: what became of it (its `id`
+/// left 0 for the caller to number) and the points its completion added, none where it failed.
+pub(crate) fn complete_vehicles(
+    cloud: &PointCloud,
+    vehicles: &[&Object],
+    completer: &Completer,
+    settings: &Settings,
+    narrowest: &Narrowest,
+) -> Vec<(VehicleReport, Option<PointCloud>)> {
+    vehicles
+        .par_iter()
+        .map(|vehicle| {
+            let mut settings = settings.clone();
+            settings.options.min_vehicle_width = narrowest.of(vehicle.guess());
+            let run = completer.run(&cloud.select(&vehicle.indices), &settings);
+            let mut report = VehicleReport {
+                id: 0,
+                guess: vehicle.guess(),
+                footprint: vehicle.footprint,
+                points: vehicle.indices.len(),
+                added: 0,
+                mirrored: 0,
+                heading: None,
+                plane: None,
+                warnings: Vec::new(),
+                failed: None,
+            };
+            let added = match run {
+                Ok(run) => {
+                    let done = run.completion;
+                    // The completion holds the vehicle's own points, then the ones it added (a
+                    // scene point may carry the synthetic flag already, so the flag cannot tell).
+                    let n = done.cloud.len();
+                    let added_points: Vec<usize> = (n - done.added..n).collect();
+                    let added = done.cloud.select(&added_points);
+                    report.added = added.len();
+                    report.mirrored = done.mirrored;
+                    report.heading = run.orientation.heading;
+                    report.plane = done.plane.map(|p| p.report(&done.frame));
+                    report.warnings = done.warnings;
+                    Some(added)
+                }
+                Err(e) => {
+                    report.failed = Some(e.to_string());
+                    None
+                }
+            };
+            (report, added)
+        })
+        .collect()
 }
 
 fn zeros(name: &str, kind: ScalarKind, n: usize) -> Attribute {

@@ -17,57 +17,91 @@ pub const PIXEL: f64 = 0.2;
 /// The plan view of `cloud`, whose first `scanned` points are the scan's and the rest
 /// completed.
 pub fn plan_view(cloud: &PointCloud, scanned: usize, up: UpAxis) -> RgbImage {
-    let origin = cloud.positions.first().copied().unwrap_or_default();
-    let flat: Vec<([f64; 2], f64)> = cloud
-        .positions
-        .iter()
-        .map(|&p| split(p, origin, up))
-        .collect();
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for (p, h) in &flat {
-        for (k, v) in [p[0], p[1], *h].into_iter().enumerate() {
-            lo[k] = lo[k].min(v);
-            hi[k] = hi[k].max(v);
+    let Some(bounds) = cloud.bounds() else {
+        return PlanView::new([0.0; 3], [0.0; 3], up).finish();
+    };
+    let mut view = PlanView::new(bounds.min, bounds.max, up);
+    for (i, &p) in cloud.positions.iter().enumerate() {
+        view.add(p, i >= scanned);
+    }
+    view.finish()
+}
+
+/// A plan view drawn a point at a time, the scan's points first: the bounds are given up front,
+/// so that a tile streamed a batch at a time is drawn without holding its points.
+pub struct PlanView {
+    origin: [f64; 3],
+    up: UpAxis,
+    /// The lowest height and the range of heights, for the grey scale.
+    low: f64,
+    heights: f64,
+    scale: f64,
+    size: [usize; 2],
+    top: Vec<f64>,
+    image: RgbImage,
+}
+
+impl PlanView {
+    /// A blank view of the box from `min` to `max` (the input's coordinates).
+    pub fn new(min: [f64; 3], max: [f64; 3], up: UpAxis) -> PlanView {
+        let (span, heights) = split(max, min, up);
+        let span = span.map(|s| s.max(1e-9));
+        let scale = ((LONG_SIDE - 1) as f64 / span[0].max(span[1])).min(1.0 / PIXEL);
+        let size = [
+            (span[0] * scale) as usize + 1,
+            (span[1] * scale) as usize + 1,
+        ];
+        PlanView {
+            origin: min,
+            up,
+            low: 0.0,
+            heights: heights.max(1e-9),
+            scale,
+            size,
+            top: vec![f64::NEG_INFINITY; size[0] * size[1]],
+            image: RgbImage::from_pixel(size[0] as u32, size[1] as u32, Rgb([255, 255, 255])),
         }
     }
-    let span = [hi[0] - lo[0], hi[1] - lo[1]].map(|s| s.max(1e-9));
-    let scale = ((LONG_SIDE - 1) as f64 / span[0].max(span[1])).min(1.0 / PIXEL);
-    let (w, h) = (
-        (span[0] * scale) as usize + 1,
-        (span[1] * scale) as usize + 1,
-    );
-    let mut top = vec![f64::NEG_INFINITY; w * h];
-    let mut image = RgbImage::from_pixel(w as u32, h as u32, Rgb([255, 255, 255]));
-    // The completed points last, so that they show over the ground under them.
-    for (i, (p, height)) in flat.iter().enumerate() {
-        let col = ((p[0] - lo[0]) * scale) as usize;
+
+    /// Draws `p`: in colour where `completed` (over whatever lies under it, so that it shows
+    /// over the ground), else grey by height where it is the highest so far in its pixel.
+    /// Points outside the box are drawn at its edge.
+    pub fn add(&mut self, p: [f64; 3], completed: bool) {
+        let (flat, height) = split(p, self.origin, self.up);
+        let [w, h] = self.size;
+        let pixel = |v: f64, n: usize| ((v * self.scale).max(0.0) as usize).min(n - 1);
+        let col = pixel(flat[0], w);
         // Image rows run down; the second horizontal axis up.
-        let row = h - 1 - ((p[1] - lo[1]) * scale) as usize;
+        let row = h - 1 - pixel(flat[1], h);
         let at = row * w + col;
-        let completed = i >= scanned;
-        if !completed && *height < top[at] {
-            continue;
+        if !completed && height < self.top[at] {
+            return;
         }
-        top[at] = top[at].max(*height);
+        self.top[at] = self.top[at].max(height);
         let colour = if completed {
             Rgb([230, 60, 30])
         } else {
-            let shade = 60.0 + 170.0 * (height - lo[2]) / (hi[2] - lo[2]).max(1e-9);
+            let shade = 60.0 + 170.0 * ((height - self.low) / self.heights).clamp(0.0, 1.0);
             Rgb([shade as u8; 3])
         };
-        image.put_pixel(col as u32, row as u32, colour);
+        self.image.put_pixel(col as u32, row as u32, colour);
     }
-    // A short street is drawn larger, each pixel as a square of pixels, to be read on a screen.
-    let k = (MIN_WIDTH / w.max(1)).max(1) as u32;
-    if k == 1 {
-        return image;
+
+    /// The view; a short street is drawn larger, each pixel as a square of pixels, to be read
+    /// on a screen.
+    pub fn finish(self) -> RgbImage {
+        let image = self.image;
+        let k = (MIN_WIDTH / self.size[0].max(1)).max(1) as u32;
+        if k == 1 {
+            return image;
+        }
+        image::imageops::resize(
+            &image,
+            image.width() * k,
+            image.height() * k,
+            image::imageops::FilterType::Nearest,
+        )
     }
-    image::imageops::resize(
-        &image,
-        image.width() * k,
-        image.height() * k,
-        image::imageops::FilterType::Nearest,
-    )
 }
 
 /// A plan view narrower than this is enlarged by a whole factor.

@@ -13,6 +13,7 @@ use mvpcc::complete::orient::OrientMode;
 use mvpcc::complete::{Completer, Method, Options, Settings, Source, Tuning};
 use mvpcc::core::frame::UpAxis;
 use mvpcc::io::default_up;
+use mvpcc::scene::stream::StreamParams;
 use mvpcc::scene::{SceneParams, Selection};
 use std::path::{Path, PathBuf};
 
@@ -56,6 +57,11 @@ pub(super) fn run(args: Box<CompleteArgs>, log: Log) -> anyhow::Result<()> {
                 None => Selection::Detect,
             },
             params: SceneParams::default(),
+            stream: StreamParams {
+                from_points: args.stream_from,
+                chunk: args.chunk,
+                ..StreamParams::default()
+            },
         }),
     };
     match (&args.input, &args.output, &args.input_dir, &args.output_dir) {

@@ -17,6 +17,52 @@ const DESCRIPTION: usize = 192;
 /// The most fields one VLR (at most 65,535 bytes) describes.
 pub(super) const MAX_FIELDS: usize = u16::MAX as usize / DESCRIPTION;
 
+/// Whether `vlr` is the Extra Bytes VLR.
+pub(super) fn is_description(vlr: &Vlr) -> bool {
+    vlr.user_id == USER && vlr.record_id == RECORD
+}
+
+/// An Extra Bytes VLR that describes `header`'s extra bytes as this module reads them
+/// ([`described`]: each element of a deprecated array a field of its own, named as it is read),
+/// then a u16 field `name` after them. The bytes no field describes are described as
+/// undocumented (type 0), so that every field, the new one too, stays where it was.
+pub(super) fn with_u16_after(header: &las::Header, name: &str) -> Vlr {
+    let room = usize::from(header.point_format().extra_bytes);
+    let mut data = Vec::new();
+    let mut at = 0;
+    for field in described(header) {
+        pad(&mut data, field.at - at);
+        data.extend(description(&field.stored));
+        at = field.at + field.raw.size();
+    }
+    pad(&mut data, room - at);
+    data.extend(description(&StoredField {
+        name: name.into(),
+        data_type: Raw::U16 as u8,
+        scale: 1.0,
+        offset: 0.0,
+        no_data: None,
+        description: String::new(),
+    }));
+    Vlr {
+        user_id: USER.into(),
+        record_id: RECORD,
+        description: "Extra Bytes Record".into(),
+        data,
+    }
+}
+
+/// Descriptions of `n` undocumented bytes (type 0, at most 255 each).
+fn pad(data: &mut Vec<u8>, mut n: usize) {
+    while n > 0 {
+        let bytes = n.min(usize::from(u8::MAX));
+        let mut d = vec![0u8; DESCRIPTION];
+        d[3] = bytes as u8;
+        data.extend(d);
+        n -= bytes;
+    }
+}
+
 /// Where a description's parts lie: name (32 bytes), no-data value, scale and offset (three
 /// 8-byte slots each, one per element of the deprecated arrays), description (32 bytes).
 const NAME: usize = 4;
@@ -146,6 +192,10 @@ pub(super) struct Field {
 }
 
 impl Field {
+    pub(super) fn name(&self) -> &str {
+        &self.stored.name
+    }
+
     fn value(&self, extra: &[u8]) -> f64 {
         let raw = self.raw.decode(&extra[self.at..self.at + self.raw.size()]);
         self.stored.offset + self.stored.scale * raw
@@ -715,5 +765,62 @@ mod tests {
         assert_eq!(read_as("return_echo_amplitude_of_chann_3"), 1.0);
         assert_eq!(read_as("return_echo_amplitude_of_chann_4"), 2.0);
         assert_eq!(read_as("return_echo_amplitude_of_chann_2"), 9.0);
+    }
+
+    /// A tile streamed through `complete --scene` keeps a scanner's extra bytes as they were,
+    /// described or not, and the new `vehicle` field after them: with every description
+    /// fitting the records (13 bytes) and with the last one past them (11).
+    #[test]
+    fn a_streamed_copy_keeps_every_extra_byte_and_adds_the_vehicle_after_them() {
+        use super::super::stream::{copy_appending, Appended};
+        for ext_len in [13u16, 11] {
+            let dir = tempfile::tempdir().unwrap();
+            let (path, out) = (dir.path().join("scan.las"), dir.path().join("out.laz"));
+            scanner_file(&path, ext_len);
+            let appended = Appended {
+                position: [9.0, 1.0, 2.0],
+                color: None,
+                id: 3,
+            };
+            let mut seen = Vec::new();
+            let written = copy_appending(
+                &path,
+                &out,
+                true,
+                Some("vehicle"),
+                std::iter::once(Ok(appended)),
+                |p, id| seen.push((p[0], id)),
+            )
+            .unwrap();
+            assert_eq!(written, 6);
+            assert_eq!(seen.last(), Some(&(9.0, Some(3))));
+            let (input, output) = (
+                read_cloud(&path, None).unwrap().cloud,
+                read_cloud(&out, None).unwrap().cloud,
+            );
+            assert_eq!(output.positions[..5], input.positions[..]);
+            for a in &input.attributes {
+                let (kind, values) = values(&output, &a.name);
+                assert_eq!((kind, &values[..5]), (a.kind, &a.values[..]), "{}", a.name);
+            }
+            assert_eq!(
+                values(&output, "vehicle"),
+                (ScalarKind::U16, vec![0.0, 0.0, 0.0, 0.0, 0.0, 3.0])
+            );
+            let synthetic = &output
+                .attribute(crate::core::cloud::SYNTHETIC)
+                .unwrap()
+                .values;
+            assert_eq!(synthetic, &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+            let raw = |path: &std::path::Path| -> Vec<Vec<u8>> {
+                let data = las::Reader::from_path(path).unwrap().read_all().unwrap();
+                data.points().map(|p| p.unwrap().extra_bytes).collect()
+            };
+            let (before, after) = (raw(&path), raw(&out));
+            for (b, a) in before.iter().zip(&after) {
+                assert_eq!(&a[..b.len()], &b[..], "{ext_len} bytes");
+                assert_eq!(a.len(), b.len() + 2);
+            }
+        }
     }
 }

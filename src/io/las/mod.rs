@@ -4,6 +4,7 @@
 //! reference system's records.
 
 mod extra_bytes;
+pub mod stream;
 
 use super::{check_fields, check_points, Problem};
 use crate::core::cloud::{
@@ -176,13 +177,24 @@ fn check_items(data: &[u8], record: u16) -> Result<(), Problem> {
 }
 
 pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
+    on_decoder_thread(path, read_checked)
+}
+
+/// Runs `f` on a LAS/LAZ reader of `path` (its claims checked first), on a thread of its own
+/// with a deep stack: the laz crate's GPS-time decoder recurses once per "switch sequence"
+/// symbol, and a damaged file of 1,248 bytes (a fuzz finding) asks for about 300 MiB of stack
+/// in a release build, several GiB in a debug one, before its data runs out. Stack pages cost
+/// memory only when touched; where the address space is limited, smaller stacks are tried.
+/// [`StackGuard`] ends such a descent with an error before the stack does, and a panic in the
+/// decoder becomes an error.
+fn on_decoder_thread<T: Send>(
+    path: &Path,
+    f: impl FnOnce(&mut GuardedReader) -> Result<T, Problem> + Send,
+) -> Result<T, Problem> {
     check_claims(path)?;
-    // On a thread of its own with a deep stack: the laz crate's GPS-time decoder recurses once
-    // per "switch sequence" symbol, and a damaged file of 1,248 bytes (a fuzz finding) asks for
-    // about 300 MiB of stack in a release build, several GiB in a debug one, before its data
-    // runs out. Stack pages cost memory only when touched; where the address space is limited,
-    // smaller stacks are tried. [`StackGuard`] ends such a descent with an error before the
-    // stack does.
+    // Held apart from each try, so that a thread that could not be started leaves it for the
+    // next one.
+    let f = std::sync::Mutex::new(Some(f));
     let decoded = DECODER_STACKS.iter().find_map(|&stack| {
         std::thread::scope(|scope| {
             std::thread::Builder::new()
@@ -190,7 +202,15 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
                 .stack_size(stack)
                 .spawn_scoped(scope, || {
                     let floor = stack_floor(stack);
-                    guarded(|| read_checked(path, floor))
+                    let f = f
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .take()
+                        .expect("one thread takes the decoding");
+                    guarded(|| {
+                        let mut reader = GuardedReader::open(path, floor)?;
+                        f(&mut reader).map_err(|p| reader.problem_of(p))
+                    })
                 })
                 .ok()
                 .map(|thread| {
@@ -208,6 +228,64 @@ pub(super) fn read(path: &Path) -> Result<PointCloud, Problem> {
         None => Err(Problem::Malformed(
             "no thread could be started to decode it".into(),
         )),
+    }
+}
+
+/// A LAS/LAZ reader whose input is read through a [`StackGuard`].
+pub(super) struct GuardedReader {
+    reader: las::Reader,
+    tripped: Arc<AtomicBool>,
+}
+
+impl GuardedReader {
+    fn open(path: &Path, stack_floor: usize) -> Result<GuardedReader, Problem> {
+        let file = std::fs::File::open(path)?;
+        let tripped = Arc::new(AtomicBool::new(false));
+        let guarded = StackGuard {
+            inner: BufReader::new(file),
+            floor: stack_floor,
+            tripped: tripped.clone(),
+        };
+        let reader = las::Reader::new(guarded).map_err(|e| problem(e, &tripped))?;
+        Ok(GuardedReader { reader, tripped })
+    }
+
+    fn header(&self) -> &las::Header {
+        self.reader.header()
+    }
+
+    /// Up to `n` more point records; none at the end.
+    fn read_points(&mut self, n: u64) -> Result<las::PointData, Problem> {
+        let tripped = &self.tripped;
+        self.reader.read_points(n).map_err(|e| problem(e, tripped))
+    }
+
+    /// A problem met while decoding, said as a too-deep nesting where the guard stopped it.
+    fn problem_of(&self, p: Problem) -> Problem {
+        if self.tripped.load(Ordering::Relaxed) {
+            nested()
+        } else {
+            p
+        }
+    }
+
+    /// The points a batch of record bytes holds for this file's format.
+    fn batch(&self) -> u64 {
+        (BATCH_BYTES / u64::from(self.header().point_format().len()).max(1)).max(1)
+    }
+}
+
+fn nested() -> Problem {
+    Problem::Malformed(
+        "its compressed points nest deeper than any valid LAZ file (damaged data)".into(),
+    )
+}
+
+fn problem(e: las::Error, tripped: &AtomicBool) -> Problem {
+    if tripped.load(Ordering::Relaxed) {
+        nested()
+    } else {
+        las_problem(e)
     }
 }
 
@@ -256,24 +334,7 @@ impl<R: std::io::Seek> std::io::Seek for StackGuard<R> {
 /// Stack sizes tried, in order, for the thread LAS/LAZ files are decoded on.
 const DECODER_STACKS: [usize; 3] = [1 << 30, 256 << 20, 16 << 20];
 
-fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> {
-    let file = std::fs::File::open(path)?;
-    let tripped = Arc::new(AtomicBool::new(false));
-    let guarded = StackGuard {
-        inner: BufReader::new(file),
-        floor: stack_floor,
-        tripped: tripped.clone(),
-    };
-    let problem = |e| {
-        if tripped.load(Ordering::Relaxed) {
-            Problem::Malformed(
-                "its compressed points nest deeper than any valid LAZ file (damaged data)".into(),
-            )
-        } else {
-            las_problem(e)
-        }
-    };
-    let mut reader = las::Reader::new(guarded).map_err(problem)?;
+fn read_checked(reader: &mut GuardedReader) -> Result<PointCloud, Problem> {
     let header = reader.header().clone();
     let declared = header.number_of_points() as usize;
     check_points(declared)?;
@@ -285,17 +346,17 @@ fn read_checked(path: &Path, stack_floor: usize) -> Result<PointCloud, Problem> 
     let described = extra_bytes::described(&header);
     check_fields(declared, described.len())?;
     let mut points = Points::new(&header, described);
-    let batch = (BATCH_BYTES / u64::from(header.point_format().len()).max(1)).max(1);
+    let batch = reader.batch();
     // In batches, so memory follows the points the file holds, not the count its header claims
     // (the las crate sizes one buffer for the whole declared count).
     loop {
-        let data = reader.read_points(batch).map_err(problem)?;
+        let data = reader.read_points(batch)?;
         if data.is_empty() {
             break;
         }
         let records = data.raw_bytes().chunks_exact(data.record_len());
         for (p, record) in data.points().zip(records) {
-            points.push(&p.map_err(problem)?, record, data.format().is_extended);
+            points.push(&p.map_err(las_problem)?, record, data.format().is_extended);
         }
     }
     let found = points.positions.len();
@@ -415,16 +476,19 @@ fn eight_bit(colors16: &[[u16; 3]]) -> Vec<[u8; 3]> {
     let sixteen_bit = colors16.iter().flatten().any(|&v| v > 255);
     colors16
         .iter()
-        .map(|c| {
-            c.map(|v| {
-                if sixteen_bit {
-                    ((v as u32 + 128) / 257) as u8
-                } else {
-                    v as u8
-                }
-            })
-        })
+        .map(|&c| eight_bit_of(c, sixteen_bit))
         .collect()
+}
+
+/// One colour as [`eight_bit`] makes it, where `sixteen_bit` says whether it scales.
+fn eight_bit_of(color: [u16; 3], sixteen_bit: bool) -> [u8; 3] {
+    color.map(|v| {
+        if sixteen_bit {
+            ((v as u32 + 128) / 257) as u8
+        } else {
+            v as u8
+        }
+    })
 }
 
 /// The point record's fields kept as attributes, with their storage kinds, in the order the

@@ -5,8 +5,9 @@
 //! here.
 //!
 //! `cargo run --release --example scene_detection -- SEED... [--length METRES] [--why]
-//! [--complete]` (`--why`: on stderr, where each missed vehicle's points went and what each
-//! false vehicle is; `--complete`: also completes each street as `complete --scene` does and
+//! [--complete]` (`--why`: on stderr, where each missed vehicle's points went, what each
+//! false vehicle is, and what each object taken for a vehicle by the flank rule alone or
+//! shorter than 2.5 m is; `--complete`: also completes each street as `complete --scene` does and
 //! counts the completed points given to objects that are no vehicle; `--real DIR
 //! [--real-seeds 201,202]`: each scan in DIR, scaled to a car's length, put in place of a
 //! parked vehicle of each street, completed there and alone, and the two compared by F1 at 1 %
@@ -295,6 +296,37 @@ fn main() {
             }
         }
         if why {
+            // Objects taken for vehicles by the flank rule alone (narrower than a vehicle),
+            // with what they are: how thin a real flank is against a façade piece.
+            let narrowest_width = SceneParams::default().sizes.width[0];
+            // And those as short as a motorcycle: what they are, and how round.
+            for o in objects.vehicles().filter(|o| o.footprint.length < 2.5) {
+                let t = &scene.objects[majority(&o.indices, &labels) as usize];
+                eprintln!(
+                    "seed {seed} short: mostly {:?} {:?}, {:.2} × {:.2} × {:.2} m, length/width {:.2}",
+                    t.kind,
+                    t.category,
+                    o.footprint.length,
+                    o.footprint.width,
+                    o.footprint.height,
+                    o.footprint.length / o.footprint.width
+                );
+            }
+            for o in objects
+                .vehicles()
+                .filter(|o| o.footprint.width < narrowest_width)
+            {
+                let t = &scene.objects[majority(&o.indices, &labels) as usize];
+                eprintln!(
+                    "seed {seed} flank: mostly {:?} {:?}, {:.1} × {:.2} × {:.1} m, {} points",
+                    t.kind,
+                    t.category,
+                    o.footprint.length,
+                    o.footprint.width,
+                    o.footprint.height,
+                    o.indices.len()
+                );
+            }
             for o in objects.vehicles() {
                 let t = &scene.objects[majority(&o.indices, &labels) as usize];
                 if t.kind != Kind::Vehicle {

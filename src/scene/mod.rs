@@ -47,6 +47,11 @@ pub struct VehicleSizes {
     /// high, less what the scan misses at its ends and at the ground); garden walls and fences
     /// are rarely that high.
     pub flank: [f64; 2],
+    /// The least such a flank is across, metres: mirrors, wheel arches and a rounded roof edge
+    /// stand out of a bus's or a lorry's side (0.30–0.47 m across on the generated streets 1–20),
+    /// where a wall's face seen from the street is a few centimetres deep (façade pieces seen
+    /// between parked vehicles there: 0.06–0.08 m).
+    pub flank_depth: f64,
 }
 
 impl Default for VehicleSizes {
@@ -56,6 +61,7 @@ impl Default for VehicleSizes {
             width: [0.5, 3.0],
             height: [0.9, 4.6],
             flank: [4.0, 1.9],
+            flank_depth: 0.15,
         }
     }
 }
@@ -529,13 +535,14 @@ fn footprint(
 }
 
 /// The size test. Two cases the plain ranges would get wrong: a van, truck or bus taller than
-/// the scanner shows it its flank alone, a wall a few decimetres thick, so a long and tall
-/// object may be narrow; and an object reaching the height above which points join no object
+/// the scanner shows it its flank alone, a few decimetres across (mirrors, wheel arches), so a
+/// long and tall object may be narrow, though not as flat as a wall's face; and an object reaching the height above which points join no object
 /// along most of its length (`cut`, [`cut_off_share`]: a façade) is taller than any vehicle,
 /// whatever its cut-off points say.
 fn verdict(f: &Footprint, cut: f64, params: &SceneParams) -> Verdict {
     let sizes = &params.sizes;
-    let flank = f.length >= sizes.flank[0] && f.height >= sizes.flank[1];
+    let flank =
+        f.length >= sizes.flank[0] && f.height >= sizes.flank[1] && f.width >= sizes.flank_depth;
     let checks = [
         (cut > 0.5, Verdict::TooTall),
         (f.length < sizes.length[0], Verdict::TooShort),
@@ -889,6 +896,33 @@ mod tests {
         assert!(score.vehicles >= 6, "{score:?}");
         assert!(score.found * 10 >= score.vehicles * 9, "{score:?}");
         assert!(score.false_vehicles <= 1 && score.merged == 0, "{score:?}");
+    }
+
+    /// A bus taller than the scanner shows its flank alone, a few decimetres across; a piece of
+    /// façade seen between parked vehicles is as long and tall but flat: it was taken for a
+    /// vehicle and given a completion.
+    #[test]
+    fn a_flank_is_a_vehicle_and_a_flat_wall_of_its_size_is_not() {
+        let params = SceneParams::default();
+        let object = |length, width, height| Footprint {
+            centre: [0.0; 3],
+            length,
+            width,
+            height,
+            axis_deg: 0.0,
+        };
+        assert_eq!(
+            verdict(&object(12.1, 0.45, 3.2), 0.0, &params),
+            Verdict::Vehicle
+        );
+        assert_eq!(
+            verdict(&object(7.0, 0.30, 3.8), 0.0, &params),
+            Verdict::Vehicle
+        );
+        assert_eq!(
+            verdict(&object(10.9, 0.06, 4.4), 0.0, &params),
+            Verdict::TooNarrow
+        );
     }
 
     /// Two points 10 km apart would ask the ground grid for 4·10⁸ cells: refused in words.

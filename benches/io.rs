@@ -1,5 +1,5 @@
 use criterion::{criterion_group, criterion_main, Criterion};
-use mvpcc::io::{read_cloud, write_cloud, Encoding};
+use mvpcc::io::{read_cloud, stream, write_cloud, Encoding};
 use std::time::Duration;
 
 mod common;
@@ -23,6 +23,30 @@ fn io(c: &mut Criterion) {
         write_cloud(&path, &cloud, None, encoding).unwrap();
         group.bench_function(format!("read 1M-point {name} ({encoding:?})"), |b| {
             b.iter(|| read_cloud(&path, None).unwrap())
+        });
+    }
+    // A street tile's streamed passes (`complete --scene` from 20M points): every point read
+    // a batch at a time, and copied record by record with a vehicle field added.
+    for name in ["las", "laz"] {
+        let path = dir.path().join(format!("car-Binary.{name}"));
+        group.bench_function(format!("stream-read 1M-point {name}"), |b| {
+            b.iter(|| stream::scan(&path, |_| Ok(())).unwrap())
+        });
+        let out = dir.path().join(format!("copy.{name}"));
+        group.bench_function(format!("stream-copy 1M-point {name}"), |b| {
+            b.iter(|| {
+                let none = std::iter::empty();
+                stream::copy_appending(
+                    &path,
+                    &out,
+                    name == "laz",
+                    Some("vehicle"),
+                    true,
+                    none,
+                    |_, _| {},
+                )
+                .unwrap()
+            })
         });
     }
     let path = dir.path().join("write.ply");

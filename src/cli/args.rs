@@ -950,13 +950,14 @@ fn positive_length(text: &str) -> Result<f64, String> {
 }
 
 /// A streamed tile's chunk side: at least 20 m, since each chunk also reads 25 m around it and a
-/// narrower one copies each point into a dozen chunks and more; at most a tile's widest.
+/// narrower one copies each point into a dozen chunks and more; at most what leaves a chunk
+/// with its margins within the widest scene searched at once.
 fn chunk_side(text: &str) -> Result<f64, String> {
+    let widest = mvpcc::scene::MAX_SPAN - 2.0 * StreamParams::default().margin;
     match text.parse::<f64>() {
-        Ok(w) if (20.0..=mvpcc::scene::MAX_SPAN).contains(&w) => Ok(w),
+        Ok(w) if (20.0..=widest).contains(&w) => Ok(w),
         _ => Err(format!(
-            "{text} is not a chunk side from 20 to {} metres",
-            mvpcc::scene::MAX_SPAN
+            "{text} is not a chunk side from 20 to {widest} metres"
         )),
     }
 }

@@ -150,10 +150,12 @@ pub fn complete_tile(
     let start = Instant::now();
     let mut spill = Spill::new(scratch.path());
     let mut tile = TileStats::default();
+    let mut index = 0u64;
     let spilled: Result<usize, Problem> = stream::scan(input, |batch| {
         for p in batch {
             tile.see(p);
-            spill.put(&grid, p).map_err(Problem::Io)?;
+            spill.put(&grid, p, index).map_err(Problem::Io)?;
+            index += 1;
         }
         Ok(())
     });
@@ -182,10 +184,11 @@ pub fn complete_tile(
     let mut appended =
         std::io::BufWriter::new(std::fs::File::create(&appended_path).map_err(scratch_err)?);
     let (mut low, mut high) = (tile.min, tile.max);
+    let mut claimed = Claimed::new(input_points);
     for &key in &spill.chunks {
-        let chunk = spill.load(key, &tile).map_err(scratch_err)?;
+        let mut chunk = spill.load(key, &tile).map_err(scratch_err)?;
         let core = chunk.core;
-        let cloud = chunk.cloud(job.selection);
+        let cloud = chunk.cloud();
         done.largest_chunk = done.largest_chunk.max(cloud.len());
         let objects =
             find_in_chunk(&cloud, job.up, job.selection, job.params, core).map_err(|source| {
@@ -195,16 +198,27 @@ pub fn complete_tile(
                 }
             })?;
         done.ground_points += objects.ground_points;
-        let own: Vec<&Object> = objects
-            .objects
-            .iter()
-            .filter(|o| grid.key(o.footprint.centre) == key)
-            .collect();
-        done.verdicts.extend(own.iter().map(|o| o.verdict));
-        let vehicles: Vec<&Object> = own
-            .into_iter()
-            .filter(|o| o.verdict == Verdict::Vehicle)
-            .collect();
+        let mut vehicles: Vec<&Object> = Vec::new();
+        for o in &objects.objects {
+            let centre = grid.key(o.footprint.centre);
+            if o.verdict != Verdict::Vehicle {
+                if centre == key {
+                    done.verdicts.push(o.verdict);
+                }
+                continue;
+            }
+            let tile_indices = o.indices.iter().map(|&i| chunk.indices[i]);
+            let owned = centre == key
+                || ((centre < key || !spill.chunks.contains(&centre))
+                    && grid.holds_whole(key, o.indices.iter().map(|&i| cloud.positions[i])));
+            if owned && !claimed.mostly(tile_indices) {
+                done.verdicts.push(o.verdict);
+                vehicles.push(o);
+            }
+        }
+        for o in &vehicles {
+            claimed.claim(o.indices.iter().map(|&i| chunk.indices[i]));
+        }
         let params = &job.params;
         for (mut report, added) in complete_vehicles(
             &cloud,
@@ -217,12 +231,20 @@ pub fn complete_tile(
             let id = u16::try_from(report.id).map_err(|_| StreamError::TooManyVehicles {
                 path: input.to_path_buf(),
             })?;
-            for (i, &p) in added.iter().flat_map(|a| a.positions.iter().enumerate()) {
-                let color = added.as_ref().and_then(|a| a.colors.as_ref()).map(|c| c[i]);
-                write_appended(&mut appended, p, color, id).map_err(scratch_err)?;
-                for k in 0..3 {
-                    low[k] = low[k].min(p[k]);
-                    high[k] = high[k].max(p[k]);
+            if let Some(added) = &added {
+                let classes = added.attribute(CLASSIFICATION).map(|a| &a.values);
+                for (i, &p) in added.positions.iter().enumerate() {
+                    let point = Appended {
+                        position: p,
+                        color: added.colors.as_ref().map(|c| c[i]),
+                        class: classes.map_or(0, |c| c[i] as u8),
+                        id,
+                    };
+                    write_appended(&mut appended, &point).map_err(scratch_err)?;
+                    for k in 0..3 {
+                        low[k] = low[k].min(p[k]);
+                        high[k] = high[k].max(p[k]);
+                    }
                 }
             }
             done.vehicles.push(report);
@@ -240,6 +262,7 @@ pub fn complete_tile(
         output,
         compressed,
         field,
+        tile.sixteen_bit,
         AppendedPoints { reader },
         |p, id| {
             if let Some(view) = &mut preview {
@@ -272,6 +295,18 @@ impl Grid {
         )
     }
 
+    /// Whether `points` lie within chunk `key`'s margins and at least the clustering gap from
+    /// their outer edge (taken as 1 m): an object cut there is not whole.
+    fn holds_whole(&self, key: Key, points: impl Iterator<Item = [f64; 3]>) -> bool {
+        let inner = self.margin - 1.0;
+        let lo = [key.0, key.1].map(|k| k as f64 * self.side - inner);
+        let hi = [key.0, key.1].map(|k| (k + 1) as f64 * self.side + inner);
+        points.into_iter().all(|p| {
+            let (h, _) = split(p, self.origin, self.up);
+            (0..2).all(|k| lo[k] <= h[k] && h[k] < hi[k])
+        })
+    }
+
     /// The chunks whose margins hold `p`, besides its own.
     fn margins(&self, p: [f64; 3], own: Key) -> impl Iterator<Item = Key> {
         let (h, _) = split(p, self.origin, self.up);
@@ -286,8 +321,44 @@ impl Grid {
     }
 }
 
-/// Bytes of a spilled point: position (3 × f64), colour (3 × u16), class.
-const RECORD: usize = 31;
+/// Points of the tile that belong to a vehicle completed already, one bit each (6 MB for 50
+/// million points).
+struct Claimed(Vec<u64>);
+
+impl Claimed {
+    fn new(points: usize) -> Claimed {
+        Claimed(vec![0; points.div_ceil(64)])
+    }
+
+    fn get(&self, i: u64) -> bool {
+        self.0
+            .get((i / 64) as usize)
+            .is_some_and(|w| w & (1 << (i % 64)) != 0)
+    }
+
+    fn claim(&mut self, points: impl Iterator<Item = u64>) {
+        for i in points {
+            if let Some(w) = self.0.get_mut((i / 64) as usize) {
+                *w |= 1 << (i % 64);
+            }
+        }
+    }
+
+    /// Whether at least half of `points` are claimed: the object is a vehicle another chunk
+    /// completed, seen again.
+    fn mostly(&self, points: impl Iterator<Item = u64>) -> bool {
+        let (mut claimed, mut all) = (0, 0);
+        for i in points {
+            claimed += usize::from(self.get(i));
+            all += 1;
+        }
+        2 * claimed >= all && all > 0
+    }
+}
+
+/// Bytes of a spilled point: position (3 × f64), colour (3 × u16), class, its index in the
+/// tile (u64).
+const RECORD: usize = 39;
 
 /// Bytes held in memory for the chunks' files before they are written out.
 const SPILL_BUFFER: usize = 64 << 20;
@@ -318,7 +389,7 @@ impl Spill {
         chunk_path(&self.dir, key, own)
     }
 
-    fn put(&mut self, grid: &Grid, p: &ScanPoint) -> std::io::Result<()> {
+    fn put(&mut self, grid: &Grid, p: &ScanPoint, index: u64) -> std::io::Result<()> {
         let own = grid.key(p.position);
         let mut record = [0u8; RECORD];
         for (k, v) in p.position.iter().enumerate() {
@@ -328,6 +399,7 @@ impl Spill {
             record[24 + 2 * k..26 + 2 * k].copy_from_slice(&v.to_le_bytes());
         }
         record[30] = p.class;
+        record[31..39].copy_from_slice(&index.to_le_bytes());
         self.chunks.insert(own);
         self.buffers
             .entry((own, true))
@@ -378,6 +450,7 @@ impl Spill {
             positions: Vec::new(),
             colors: tile.has_color.then(Vec::new),
             classes: Vec::new(),
+            indices: Vec::new(),
             core: 0,
         };
         for own in [true, false] {
@@ -397,6 +470,9 @@ impl Spill {
                     colors.push(stream::eight_bit([c(0), c(1), c(2)], tile.sixteen_bit));
                 }
                 chunk.classes.push(r[30]);
+                chunk.indices.push(u64::from_le_bytes(
+                    r[31..39].try_into().expect("eight bytes"),
+                ));
             }
             if own {
                 chunk.core = chunk.positions.len();
@@ -453,41 +529,40 @@ struct Chunk {
     positions: Vec<[f64; 3]>,
     colors: Option<Vec<[u8; 3]>>,
     classes: Vec<u8>,
+    /// Each point's index in the tile.
+    indices: Vec<u64>,
     /// How many of the points are the chunk's own (they come first).
     core: usize,
 }
 
 impl Chunk {
-    fn cloud(self, selection: &Selection) -> PointCloud {
-        let mut cloud = PointCloud::from_positions(self.positions);
-        cloud.colors = self.colors;
-        if matches!(selection, Selection::Classes(_)) {
-            cloud.attributes.push(Attribute {
-                name: CLASSIFICATION.into(),
-                kind: ScalarKind::U8,
-                values: self.classes.iter().map(|&c| f64::from(c)).collect(),
-            });
-        }
+    /// The chunk as a cloud with its classes, which its completed points take from their
+    /// nearest scanned points as when the tile is read whole.
+    fn cloud(&mut self) -> PointCloud {
+        let mut cloud = PointCloud::from_positions(std::mem::take(&mut self.positions));
+        cloud.colors = self.colors.take();
+        cloud.attributes.push(Attribute {
+            name: CLASSIFICATION.into(),
+            kind: ScalarKind::U8,
+            values: self.classes.iter().map(|&c| f64::from(c)).collect(),
+        });
         cloud
     }
 }
 
-/// Bytes of an appended point: position (3 × f64), whether it has a colour, the colour, id.
-const APPENDED: usize = 30;
+/// Bytes of an appended point: position (3 × f64), whether it has a colour, the colour, class,
+/// id.
+const APPENDED: usize = 31;
 
-fn write_appended(
-    w: &mut impl Write,
-    p: [f64; 3],
-    color: Option<[u8; 3]>,
-    id: u16,
-) -> std::io::Result<()> {
+fn write_appended(w: &mut impl Write, a: &Appended) -> std::io::Result<()> {
     let mut record = [0u8; APPENDED];
-    for (k, v) in p.iter().enumerate() {
+    for (k, v) in a.position.iter().enumerate() {
         record[8 * k..8 * k + 8].copy_from_slice(&v.to_le_bytes());
     }
-    record[24] = u8::from(color.is_some());
-    record[25..28].copy_from_slice(&color.unwrap_or_default());
-    record[28..30].copy_from_slice(&id.to_le_bytes());
+    record[24] = u8::from(a.color.is_some());
+    record[25..28].copy_from_slice(&a.color.unwrap_or_default());
+    record[28] = a.class;
+    record[29..31].copy_from_slice(&a.id.to_le_bytes());
     w.write_all(&record)
 }
 
@@ -510,7 +585,8 @@ impl<R: Read> Iterator for AppendedPoints<R> {
         Some(Ok(Appended {
             position: [f(0), f(1), f(2)],
             color: (r[24] != 0).then(|| [r[25], r[26], r[27]]),
-            id: u16::from_le_bytes([r[28], r[29]]),
+            class: r[28],
+            id: u16::from_le_bytes([r[29], r[30]]),
         }))
     }
 }
@@ -558,14 +634,14 @@ mod tests {
             (at(150.0, 50.0), 9),
         ];
         let mut tile = TileStats::default();
-        for &(position, class) in &points {
+        for (index, &(position, class)) in points.iter().enumerate() {
             let p = ScanPoint {
                 position,
                 color: Some([300, 0, 65535]),
                 class,
             };
             tile.see(&p);
-            spill.put(&g, &p).unwrap();
+            spill.put(&g, &p, index as u64).unwrap();
         }
         spill.flush().unwrap();
         assert_eq!(
@@ -576,6 +652,7 @@ mod tests {
         assert_eq!(chunk.core, 2);
         assert_eq!(chunk.positions, [points[0].0, points[2].0, points[1].0]);
         assert_eq!(chunk.classes, [3, 9, 7]);
+        assert_eq!(chunk.indices, [0, 2, 1]);
         // 16-bit colours scaled to 8 bits, as reading the tile whole does.
         assert_eq!(chunk.colors.as_deref(), Some(&[[1, 0, 255]; 3][..]));
         let own = spill.load((0, 0), &tile).unwrap();
@@ -584,26 +661,47 @@ mod tests {
 
     #[test]
     fn appended_points_read_back_as_written() {
+        let points = [
+            Appended {
+                position: [1.5, -2.25, 1e6],
+                color: Some([1, 2, 3]),
+                class: 64,
+                id: 7,
+            },
+            Appended {
+                position: [0.0; 3],
+                color: None,
+                class: 0,
+                id: 65535,
+            },
+        ];
         let mut bytes = Vec::new();
-        write_appended(&mut bytes, [1.5, -2.25, 1e6], Some([1, 2, 3]), 7).unwrap();
-        write_appended(&mut bytes, [0.0; 3], None, 65535).unwrap();
+        for p in &points {
+            write_appended(&mut bytes, p).unwrap();
+        }
         let back: Vec<Appended> = AppendedPoints { reader: &bytes[..] }
             .collect::<Result<_, _>>()
             .unwrap();
-        assert_eq!(
-            back,
-            [
-                Appended {
-                    position: [1.5, -2.25, 1e6],
-                    color: Some([1, 2, 3]),
-                    id: 7
-                },
-                Appended {
-                    position: [0.0; 3],
-                    color: None,
-                    id: 65535
-                }
-            ]
-        );
+        assert_eq!(back, points);
+    }
+
+    /// A vehicle near a border is seen by both chunks, each cutting it a little differently:
+    /// the chunk that completes it claims its points, and the other sees it claimed.
+    #[test]
+    fn a_vehicle_completed_once_is_claimed_for_the_chunks_after() {
+        let mut claimed = Claimed::new(200);
+        claimed.claim(10..110);
+        assert!(claimed.mostly(20..150), "90 of 130 claimed");
+        assert!(!claimed.mostly(100..150), "10 of 50 claimed");
+        assert!(!claimed.mostly(std::iter::empty()));
+    }
+
+    #[test]
+    fn an_object_cut_at_the_margins_edge_is_not_whole() {
+        let g = grid();
+        // Chunk (0, 0) sees from −25 m to 125 m; an object within 1 m of that edge may go on.
+        assert!(g.holds_whole((0, 0), [at(-20.0, 5.0), at(120.0, 50.0)].into_iter()));
+        assert!(!g.holds_whole((0, 0), [at(-24.5, 5.0)].into_iter()));
+        assert!(!g.holds_whole((0, 0), [at(50.0, 124.5)].into_iter()));
     }
 }

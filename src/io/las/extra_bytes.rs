@@ -780,6 +780,7 @@ mod tests {
             let appended = Appended {
                 position: [9.0, 1.0, 2.0],
                 color: None,
+                class: 0,
                 id: 3,
             };
             let mut seen = Vec::new();
@@ -788,6 +789,7 @@ mod tests {
                 &out,
                 true,
                 Some("vehicle"),
+                true,
                 std::iter::once(Ok(appended)),
                 |p, id| seen.push((p[0], id)),
             )

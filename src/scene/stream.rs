@@ -5,8 +5,8 @@
 //! 1. each point's position, colour and class go to the scratch file of the square chunk of the
 //!    ground plan it lies in, and to those of the chunks whose margin it lies in;
 //! 2. each chunk with its margins is searched for vehicles as a whole scene is
-//!    ([`super::find_in_chunk`]), and the vehicles whose footprint's centre lies in the chunk
-//!    itself are completed ([`super::complete_vehicles`]): a vehicle crossing a border is whole
+//!    (`find_in_chunk`), and the vehicles whose footprint's centre lies in the chunk
+//!    itself are completed (`complete_vehicles`): a vehicle crossing a border is whole
 //!    in the margins of the chunk that holds its centre, and completed there alone;
 //! 3. the tile is copied into the output record by record, and the completed points appended.
 //!

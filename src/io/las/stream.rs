@@ -28,7 +28,7 @@ pub struct TileHeader {
 pub struct ScanPoint {
     pub position: [f64; 3],
     /// 16-bit colour as stored (some writers store 8-bit values as they are: the caller decides
-    /// with [`super::eight_bit`]'s rule once every point is seen).
+    /// with the rule of reading a tile whole once every point is seen).
     pub color: Option<[u16; 3]>,
     /// The classification code (LAS 1.4's byte as it is).
     pub class: u8,
@@ -102,7 +102,7 @@ fn next_batch(reader: &mut GuardedReader) -> Result<Option<las::PointData>, Prob
 }
 
 /// `color` as 8-bit: scaled down where `sixteen_bit` (some value of the tile's is above 255),
-/// as [`super::read`] does.
+/// as reading the tile whole does.
 pub fn eight_bit(color: [u16; 3], sixteen_bit: bool) -> [u8; 3] {
     super::eight_bit_of(color, sixteen_bit)
 }

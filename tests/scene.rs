@@ -205,6 +205,19 @@ fn a_street_without_vehicles_comes_back_unchanged_and_says_so() {
         ));
     let (scanned, done) = (read(&input), read(&output));
     assert_eq!(done, scanned);
+    // Streamed as read whole, and a class no point has is said.
+    mvpcc()
+        .args(["complete", "--scene", s(&input), s(&output)])
+        .args(["--stream-from", "0", "--vehicle-class", "10,64"])
+        .assert()
+        .success()
+        .stderr(predicate::str::contains(
+            "--vehicle-class 64: no point has this class",
+        ))
+        .stderr(predicate::str::contains(
+            "no vehicle found among 0 objects; the scan is written unchanged",
+        ));
+    assert_eq!(read(&output), scanned);
 }
 
 #[test]
@@ -556,25 +569,4 @@ fn a_tile_streamed_in_chunks_completes_each_vehicle_once_as_read_whole() {
     let (a, b) = (added(&chunked), added(&read_whole));
     assert!((a - b).abs() <= 0.05 * b, "{a} streamed, {b} read whole");
     assert_eq!(done.len(), n + a as usize);
-}
-
-/// Streamed as read whole: a tile without vehicles comes back as it was, and a class no point
-/// has is said.
-#[test]
-fn a_streamed_tile_without_vehicles_comes_back_unchanged() {
-    let dir = TempDir::new().unwrap();
-    let input = write(&dir, "empty.las", &street(false));
-    let output = dir.path().join("done.las");
-    mvpcc()
-        .args(["complete", "--scene", s(&input), s(&output)])
-        .args(["--stream-from", "0", "--vehicle-class", "10,64"])
-        .assert()
-        .success()
-        .stderr(predicate::str::contains(
-            "--vehicle-class 64: no point has this class",
-        ))
-        .stderr(predicate::str::contains(
-            "no vehicle found among 0 objects; the scan is written unchanged",
-        ));
-    assert_eq!(read(&output), read(&input));
 }

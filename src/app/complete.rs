@@ -362,7 +362,7 @@ fn complete_scene_file(
     let start = Instant::now();
     write_cloud(output, &done.cloud, Some(format), job.files.encoding)?;
     if let Some(path) = &job.files.preview {
-        write_plan_view(
+        write_image(
             path,
             &plan_view(&done.cloud, cloud.len(), settings.options.up),
         )?;
@@ -432,7 +432,7 @@ fn complete_tile_file(
         &done.vehicles,
     ));
     if let (Some(path), Some(image)) = (&job.files.preview, &done.preview) {
-        write_plan_view(path, image)?;
+        write_image(path, image)?;
     }
     let passes = done.passes;
     let outcome = SceneOutcome {
@@ -487,7 +487,8 @@ fn scene_warnings(
     warnings
 }
 
-fn write_plan_view(path: &Path, image: &image::RgbImage) -> Result<(), FileError> {
+/// Writes a preview image in the format its extension names.
+fn write_image(path: &Path, image: &image::RgbImage) -> Result<(), FileError> {
     let format = preview_format(path)?;
     atomic_write(path, |w| {
         image.write_to(w, format).map_err(std::io::Error::other)
@@ -666,15 +667,7 @@ fn write_preview(path: &Path, input: &PointCloud, done: &Completion) -> Result<(
         title: format!("OUTPUT {} +{}", done.cloud.len(), done.added),
         plane: done.plane.map(|p| p.offset),
     };
-    let img = render(&left, &right);
-    let format = preview_format(path)?;
-    atomic_write(path, |w| {
-        img.write_to(w, format).map_err(std::io::Error::other)
-    })
-    .map_err(|source| FileError::Preview {
-        path: path.to_path_buf(),
-        source,
-    })
+    write_image(path, &render(&left, &right))
 }
 
 /// A batch: which files, where their outputs go, and how many workers complete them.
